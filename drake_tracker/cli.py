@@ -1,0 +1,87 @@
+"""The ``drake-tracker`` command line: demo, record, track, bench.
+
+Each subcommand's work lives in its own module; this file only parses arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def _add_demo(sub) -> None:
+    p = sub.add_parser("demo", help="simulate a scenario, track it, and write a report")
+    p.add_argument("--scenario", default="s-full-arm/constant",
+                   help="preset name or YAML file (default: %(default)s)")
+    p.add_argument("--out", default="out/demo", help="output folder (default: %(default)s)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="override the scenario duration (s)")
+
+    def run(args):
+        from drake_tracker.demo import run_demo
+
+        return run_demo(args)
+
+    p.set_defaults(func=run)
+
+
+def _add_record(sub) -> None:
+    p = sub.add_parser("record", help="simulate a scenario and write a recorded run (.npz)")
+    p.add_argument("--scenario", default="s-full-arm/constant")
+    p.add_argument("--out", required=True, help="output .npz file")
+    p.add_argument("--duration", type=float, default=None,
+                   help="override the scenario duration (s)")
+    p.add_argument("--image-stride", type=int, default=8,
+                   help="store every N-th pixel of each image (default: %(default)s)")
+
+    def run(args):
+        from drake_tracker.sim.record import run_record
+
+        return run_record(args)
+
+    p.set_defaults(func=run)
+
+
+def _add_track(sub) -> None:
+    p = sub.add_parser("track", help="replay a recorded run through the offline tracker")
+    p.add_argument("--run", required=True, help="recorded run (.npz)")
+    p.add_argument("--params", default=None, help="tracker parameters YAML file")
+    p.add_argument("--out", default=None, help="folder for report.json (optional)")
+
+    def run(args):
+        from drake_tracker.offline import run_track
+
+        return run_track(args)
+
+    p.set_defaults(func=run)
+
+
+def _add_bench(sub) -> None:
+    p = sub.add_parser("bench", help="benchmark the tracker's hot paths")
+    p.add_argument("--out", default="out/bench", help="folder for bench.json")
+    p.add_argument("--quick", action="store_true", help="fewer repetitions")
+
+    def run(args):
+        from drake_tracker.bench import run_bench
+
+        return run_bench(args)
+
+    p.set_defaults(func=run)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="drake-tracker", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    for add in (_add_demo, _add_record, _add_track, _add_bench):
+        add(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    result = args.func(args)
+    return int(result or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Functional core of the tracker: plain numpy/numba code, no Diagram needed."""

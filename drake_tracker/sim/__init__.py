@@ -1,0 +1,1 @@
+"""The simulated world: scenarios, trajectories, biased encoders, the delayed depth camera."""

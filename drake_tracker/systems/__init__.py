@@ -1,0 +1,1 @@
+"""Thin Drake LeafSystems around the functional core."""
