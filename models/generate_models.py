@@ -87,7 +87,8 @@ def _sdf_revolute(name, parent, child, axis, lower_deg, upper_deg) -> str:
 
 
 def _sdf_fixed(name, parent, child) -> str:
-    return f'<joint name="{name}" type="fixed"><parent>{parent}</parent><child>{child}</child></joint>'
+    return (f'<joint name="{name}" type="fixed"><parent>{parent}</parent>'
+            f"<child>{child}</child></joint>")
 
 
 def apollo_sdf() -> str:

@@ -1,0 +1,136 @@
+"""The occlusion-robust depth-pixel likelihood (paper eqs. 1-2, SPEC §2).
+
+For an observed depth ``z`` and the depth ``d`` the robot renders at that pixel:
+
+* ``σ = σ_model + σ_factor z²``
+* ``p_vis(z|d) = w/Z_max + (1-w) N(z; d, σ²)``
+* ``p_occ(z|d) = w/Z_max + (1-w) λ/(1-e^{-λd}) exp(-λz + λ²σ²/2) Φ((d - z + λσ²)/σ)``
+* ``p(z|d) = (1-o) p_vis + o p_occ``
+
+Each pixel scores ``log(p(z|d) / p_occ(z|∞))``: pixels where nothing is rendered and
+invalid pixels (NaN, <= 0, > Z_max) score 0. A particle's log-likelihood is the sum.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+
+@dataclass
+class LikelihoodParams:
+    """Parameters of the pixel model; loadable from YAML."""
+
+    #: Tail weight w: probability of a uniformly random depth reading.
+    tail_weight: float = 0.01
+    #: σ_model (m): depth noise standard deviation at zero depth.
+    depth_noise_std_m: float = 0.003
+    #: σ_factor (1/m): growth of the noise standard deviation with depth squared.
+    depth_noise_factor_per_m: float = 0.0014247
+    #: Z_max (m): largest valid depth; the support of the uniform tail.
+    max_depth_m: float = 6.0
+    #: λ (1/m): rate of the exponential prior over an occluder's depth.
+    occluder_rate_per_m: float = math.log(2.0)
+    #: o: prior probability that a pixel is occluded.
+    occlusion_probability: float = 0.1
+
+    def validate(self) -> None:
+        def need(cond: bool, field: str, why: str) -> None:
+            if not cond:
+                raise ValueError(f"LikelihoodParams.{field} = {getattr(self, field)}: {why}")
+
+        need(0 < self.tail_weight < 1, "tail_weight", "must be in (0, 1)")
+        need(self.depth_noise_std_m > 0, "depth_noise_std_m", "must be > 0")
+        need(self.depth_noise_factor_per_m >= 0, "depth_noise_factor_per_m", "must be >= 0")
+        need(self.max_depth_m > 0, "max_depth_m", "must be > 0")
+        need(self.occluder_rate_per_m > 0, "occluder_rate_per_m", "must be > 0")
+        need(0 <= self.occlusion_probability < 1, "occlusion_probability", "must be in [0, 1)")
+
+
+def pixel_sigma(z: np.ndarray, params: LikelihoodParams) -> np.ndarray:
+    return params.depth_noise_std_m + params.depth_noise_factor_per_m * np.square(z)
+
+
+def valid_pixels(z: np.ndarray, params: LikelihoodParams) -> np.ndarray:
+    """Boolean mask of usable observed depths."""
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(z) & (z > 0) & (z <= params.max_depth_m)
+
+
+@dataclass
+class PreparedObservation:
+    """An observed image reduced to its valid pixels and their per-pixel constants."""
+
+    pixel_index: np.ndarray  # (P,) int64 flat indices into the H*W image
+    z: np.ndarray  # (P,) observed depth
+    sigma: np.ndarray
+    gauss_coeff: np.ndarray  # (1-w)/(σ√(2π))
+    occ_coeff: np.ndarray  # (1-w) λ exp(-λz + λ²σ²/2)
+    log_p_occ_inf: np.ndarray  # log p_occ(z|∞)
+    shape: tuple[int, int]
+
+    @property
+    def num_valid(self) -> int:
+        return len(self.z)
+
+
+def prepare_observation(depth: np.ndarray, params: LikelihoodParams) -> PreparedObservation:
+    """Checks an observed (H, W) depth image and precomputes what depends only on it."""
+    depth = np.asarray(depth)
+    if depth.ndim != 2 or depth.size == 0:
+        raise ValueError(f"depth image must be a non-empty 2-D array, got shape {depth.shape}")
+    if not np.issubdtype(depth.dtype, np.floating):
+        raise ValueError(f"depth image must be floating point metres, got dtype {depth.dtype}")
+    flat = depth.astype(np.float64).ravel()
+    index = np.flatnonzero(valid_pixels(flat, params))
+    z = flat[index]
+    sigma = pixel_sigma(z, params)
+    w, lam = params.tail_weight, params.occluder_rate_per_m
+    gauss_coeff = (1.0 - w) / (sigma * math.sqrt(2.0 * math.pi))
+    occ_coeff = (1.0 - w) * lam * np.exp(-lam * z + 0.5 * lam**2 * sigma**2)
+    log_p_occ_inf = np.log(w / params.max_depth_m + occ_coeff)
+    return PreparedObservation(index, z, sigma, gauss_coeff, occ_coeff, log_p_occ_inf,
+                               depth.shape)
+
+
+@numba.njit(parallel=True, cache=True)
+def _sum_log_ratios(rendered, index, z, sigma, gauss_coeff, occ_coeff, log_p_occ_inf,
+                    uniform, lam, occlusion):
+    num = rendered.shape[0]
+    out = np.zeros(num)
+    inv_sqrt2 = 1.0 / math.sqrt(2.0)
+    for n in numba.prange(num):
+        total = 0.0
+        for p in range(index.shape[0]):
+            d = rendered[n, index[p]]
+            if not np.isfinite(d):
+                continue
+            s = sigma[p]
+            r = (z[p] - d) / s
+            p_vis = uniform + gauss_coeff[p] * math.exp(-0.5 * r * r)
+            phi = 0.5 * math.erfc(-(d - z[p] + lam * s * s) / s * inv_sqrt2)
+            p_occ = uniform + occ_coeff[p] * phi / (1.0 - math.exp(-lam * d))
+            total += math.log((1.0 - occlusion) * p_vis + occlusion * p_occ) - log_p_occ_inf[p]
+        out[n] = total
+    return out
+
+
+def log_likelihoods(rendered: np.ndarray, observation: PreparedObservation,
+                    params: LikelihoodParams) -> np.ndarray:
+    """Log-likelihood of each of N rendered (N, H, W) depth images (inf = not rendered)."""
+    rendered = np.asarray(rendered)
+    if rendered.ndim != 3 or rendered.shape[1:] != observation.shape:
+        raise ValueError(f"rendered images have shape {rendered.shape}, expected "
+                         f"(N, {observation.shape[0]}, {observation.shape[1]})")
+    flat = rendered.reshape(rendered.shape[0], -1)
+    if observation.num_valid == 0:
+        return np.zeros(rendered.shape[0])
+    return _sum_log_ratios(
+        flat, observation.pixel_index, observation.z, observation.sigma,
+        observation.gauss_coeff, observation.occ_coeff, observation.log_p_occ_inf,
+        params.tail_weight / params.max_depth_m, params.occluder_rate_per_m,
+        params.occlusion_probability,
+    )

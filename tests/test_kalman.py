@@ -1,0 +1,144 @@
+"""The Kalman bank against an independent textbook filter on the stacked 2n-state system."""
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.kalman import (
+    COV_AB,
+    MEAN_A,
+    MEAN_B,
+    VAR_A,
+    VAR_B,
+    JointKalmanBank,
+    KalmanBankParams,
+    initial_moments,
+    recombine_with_bias,
+)
+
+
+def _params(n, rng):
+    return KalmanBankParams(
+        encoder_noise_std=rng.uniform(1e-3, 1e-2, n),
+        angle_process_std=rng.uniform(0.1, 2.0, n),
+        bias_process_std=rng.uniform(1e-3, 1e-2, n),
+        bias_decay_per_s=rng.uniform(0.3, 1.0, n),
+        has_bias=np.array([True] * (n - 1) + [False]),
+    )
+
+
+def _textbook(params, x, P, dt, q):
+    """Dense Kalman filter on x = [a_1..a_n, b_1..b_n]."""
+    n = params.num_joints
+    c = params.bias_decay_per_s**dt
+    F = np.block([[np.eye(n), np.zeros((n, n))], [np.zeros((n, n)), np.diag(c)]])
+    sb = np.where(params.has_bias, params.bias_process_std, 0.0)
+    Q = np.diag(np.concatenate([dt * params.angle_process_std**2, dt * sb**2]))
+    H = np.hstack([np.eye(n), np.eye(n)])
+    R = np.diag(params.encoder_noise_std**2)
+    x = F @ x
+    P = F @ P @ F.T + Q
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    x = x + K @ (q - H @ x)
+    P = (np.eye(2 * n) - K @ H) @ P
+    return x, P
+
+
+def test_bank_matches_textbook_stacked_filter():
+    rng = np.random.default_rng(0)
+    n = 5
+    params = _params(n, rng)
+    bank = JointKalmanBank(params)
+    m = initial_moments(rng.normal(size=n), np.full(n, 0.5), np.full(n, 0.1), params.has_bias)
+    x = np.concatenate([m[MEAN_A], m[MEAN_B]])
+    P = np.diag(np.concatenate([m[VAR_A], m[VAR_B]]))
+    t = 0.0
+    for _ in range(200):
+        dt = rng.uniform(0.0005, 0.003)  # irregular time stamps
+        t += dt
+        q = rng.normal(size=n)
+        m = bank.step(m, dt, q)
+        x, P = _textbook(params, x, P, dt, q)
+    np.testing.assert_allclose(m[MEAN_A], x[:n], atol=1e-9)
+    np.testing.assert_allclose(m[MEAN_B], x[n:], atol=1e-9)
+    np.testing.assert_allclose(m[VAR_A], np.diag(P)[:n], rtol=1e-7, atol=1e-14)
+    np.testing.assert_allclose(m[COV_AB], np.diag(P, n), rtol=1e-7, atol=1e-14)
+    np.testing.assert_allclose(m[VAR_B], np.diag(P)[n:], rtol=1e-7, atol=1e-14)
+    # The joint without bias never acquires one.
+    assert m[MEAN_B, -1] == 0.0 and m[VAR_B, -1] == 0.0
+
+
+def test_bias_variance_converges_to_eq8_without_readings():
+    rng = np.random.default_rng(1)
+    params = _params(4, rng)
+    bank = JointKalmanBank(params)
+    m = initial_moments(np.zeros(4), np.ones(4), np.full(4, 0.3), params.has_bias)
+    dt = 0.01
+    for _ in range(20000):
+        m = bank.predict(m, dt)
+    expected = params.stationary_bias_variance(dt)
+    np.testing.assert_allclose(m[VAR_B, :3], expected[:3], rtol=1e-6)
+    assert m[VAR_B, 3] == 0.0
+
+
+def test_recombination_equals_kalman_update_with_angle_observation():
+    """Eq. (16) with the exact posterior of y = a + N(0, r) is the Kalman update."""
+    rng = np.random.default_rng(2)
+    n = 3
+    m = initial_moments(rng.normal(size=n), np.full(n, 0.2), np.full(n, 0.1), np.ones(n, bool))
+    m[COV_AB] = [-0.005, 0.002, -0.009]
+    y, r = rng.normal(size=n), np.full(n, 0.01)
+    s_post = 1 / (1 / m[VAR_A] + 1 / r)
+    mu_post = s_post * (m[MEAN_A] / m[VAR_A] + y / r)
+    out = recombine_with_bias(m, mu_post, s_post)
+    for j in range(n):
+        P = np.array([[m[VAR_A, j], m[COV_AB, j]], [m[COV_AB, j], m[VAR_B, j]]])
+        H = np.array([[1.0, 0.0]])
+        S = H @ P @ H.T + r[j]
+        K = P @ H.T / S
+        x = np.array([m[MEAN_A, j], m[MEAN_B, j]]) + (K * (y[j] - m[MEAN_A, j])).ravel()
+        P = P - K @ H @ P
+        np.testing.assert_allclose([out[MEAN_A, j], out[MEAN_B, j]], x, atol=1e-12)
+        np.testing.assert_allclose(
+            [out[VAR_A, j], out[COV_AB, j], out[VAR_B, j]], [P[0, 0], P[0, 1], P[1, 1]], atol=1e-12
+        )
+
+
+@pytest.mark.parametrize(
+    "field, value, message",
+    [
+        ("encoder_noise_std", 0.0, "encoder_noise_std of joint j1"),
+        ("angle_process_std", -1.0, "angle_process_std of joint j1"),
+        ("bias_decay_per_s", 1.5, "must be in \\(0, 1\\]"),
+        ("bias_decay_per_s", 0.0, "must be in \\(0, 1\\]"),
+    ],
+)
+def test_bad_parameters_are_named(field, value, message):
+    good = dict(
+        encoder_noise_std=np.full(2, 1e-3),
+        angle_process_std=np.ones(2),
+        bias_process_std=np.full(2, 1e-3),
+        bias_decay_per_s=np.full(2, 0.9),
+        has_bias=np.ones(2, bool),
+        names=("j0", "j1"),
+    )
+    good[field] = np.array([good[field][0], value])
+    with pytest.raises(ValueError, match=message):
+        KalmanBankParams(**good)
+
+
+def test_bad_readings_are_rejected():
+    params = KalmanBankParams(
+        np.full(2, 1e-3),
+        np.ones(2),
+        np.full(2, 1e-3),
+        np.full(2, 0.9),
+        np.ones(2, bool),
+        names=("j0", "j1"),
+    )
+    bank = JointKalmanBank(params)
+    m = initial_moments(np.zeros(2), np.ones(2), np.ones(2), np.ones(2, bool))
+    with pytest.raises(ValueError, match="shape"):
+        bank.step(m, 0.001, np.zeros(3))
+    with pytest.raises(ValueError, match="j1"):
+        bank.step(m, 0.001, np.array([0.0, np.nan]))

@@ -1,0 +1,114 @@
+"""The pixel likelihood against a direct scalar evaluation and numerical integration."""
+
+import math
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.likelihood import LikelihoodParams, log_likelihoods, prepare_observation
+
+PARAMS = LikelihoodParams(
+    tail_weight=0.02,
+    depth_noise_std_m=0.004,
+    depth_noise_factor_per_m=0.002,
+    max_depth_m=6.0,
+    occluder_rate_per_m=math.log(2.0),
+    occlusion_probability=0.2,
+)
+
+
+def _normal_pdf(x, mu, s):
+    return math.exp(-0.5 * ((x - mu) / s) ** 2) / (s * math.sqrt(2 * math.pi))
+
+
+def _p_occ_by_integration(z, d, p):
+    """Occluder depth y ~ truncated exponential on [0, d], blurred by N(0, sigma(z)^2)."""
+    s = p.depth_noise_std_m + p.depth_noise_factor_per_m * z * z
+    lam = p.occluder_rate_per_m
+    y = np.linspace(0.0, d, 200001)
+    prior = lam * np.exp(-lam * y) / (1 - math.exp(-lam * d))
+    integrand = prior * np.exp(-0.5 * ((z - y) / s) ** 2) / (s * math.sqrt(2 * math.pi))
+    dens = np.trapezoid(integrand, y)
+    return p.tail_weight / p.max_depth_m + (1 - p.tail_weight) * dens
+
+
+def _p_occ_inf(z, p):
+    s = p.depth_noise_std_m + p.depth_noise_factor_per_m * z * z
+    lam = p.occluder_rate_per_m
+    return p.tail_weight / p.max_depth_m + (1 - p.tail_weight) * lam * math.exp(
+        -lam * z + lam**2 * s**2 / 2
+    )
+
+
+def _scalar_log_ratio(z, d, p):
+    """Direct transcription of SPEC §2 for one pixel."""
+    if not (np.isfinite(z) and 0 < z <= p.max_depth_m) or not np.isfinite(d):
+        return 0.0
+    s = p.depth_noise_std_m + p.depth_noise_factor_per_m * z * z
+    lam, w = p.occluder_rate_per_m, p.tail_weight
+    p_vis = w / p.max_depth_m + (1 - w) * _normal_pdf(z, d, s)
+    phi = 0.5 * (1 + math.erf((d - z + lam * s * s) / s / math.sqrt(2)))
+    p_occ = (
+        w / p.max_depth_m
+        + (1 - w) * lam / (1 - math.exp(-lam * d)) * math.exp(-lam * z + lam**2 * s**2 / 2) * phi
+    )
+    p_all = (1 - p.occlusion_probability) * p_vis + p.occlusion_probability * p_occ
+    return math.log(p_all) - math.log(_p_occ_inf(z, p))
+
+
+def test_vectorised_equals_scalar_formula():
+    rng = np.random.default_rng(3)
+    H, W, N = 6, 8, 5
+    z = rng.uniform(0.3, 3.0, (H, W))
+    z[0, 0], z[1, 1], z[2, 2], z[3, 3] = np.nan, 0.0, 7.0, -1.0  # invalid pixels
+    rendered = z[None] + rng.normal(0, 0.05, (N, H, W))
+    rendered[:, :, 0] = np.inf  # nothing rendered
+    rendered[0, 4, 4] = z[4, 4] + 1.0  # robot behind the observed surface: occluded
+    rendered[1, 4, 4] = z[4, 4] - 0.5  # robot in front: contradiction
+    got = log_likelihoods(rendered, prepare_observation(z, PARAMS), PARAMS)
+    expected = [
+        sum(
+            _scalar_log_ratio(z[i, j], rendered[n, i, j], PARAMS)
+            for i in range(H)
+            for j in range(W)
+        )
+        for n in range(N)
+    ]
+    np.testing.assert_allclose(got, expected, rtol=1e-10)
+
+
+@pytest.mark.parametrize("z, d", [(1.0, 1.5), (0.8, 0.8), (2.0, 1.99), (1.2, 3.0), (0.5, 1.0)])
+def test_occlusion_term_by_numerical_integration(z, d):
+    s = PARAMS.depth_noise_std_m + PARAMS.depth_noise_factor_per_m * z * z
+    lam, w = PARAMS.occluder_rate_per_m, PARAMS.tail_weight
+    closed = w / PARAMS.max_depth_m + (1 - w) * lam / (1 - math.exp(-lam * d)) * math.exp(
+        -lam * z + lam**2 * s**2 / 2
+    ) * 0.5 * (1 + math.erf((d - z + lam * s * s) / s / math.sqrt(2)))
+    assert closed == pytest.approx(_p_occ_by_integration(z, d, PARAMS), rel=1e-6)
+    # The pixel score in the fully occluded case (o -> 1) is log(p_occ(z|d) / p_occ(z|inf)).
+    p = LikelihoodParams(**{**PARAMS.__dict__, "occlusion_probability": 1 - 1e-12})
+    score = log_likelihoods(np.full((1, 1, 1), d), prepare_observation(np.full((1, 1), z), p), p)
+    assert score[0] == pytest.approx(math.log(closed / _p_occ_inf(z, p)), rel=1e-6, abs=1e-9)
+
+
+def test_unrendered_and_invalid_pixels_score_zero():
+    z = np.full((3, 4), np.nan)
+    assert log_likelihoods(np.ones((2, 3, 4)), prepare_observation(z, PARAMS), PARAMS).tolist() == [
+        0,
+        0,
+    ]
+    z = np.ones((3, 4))
+    assert log_likelihoods(
+        np.full((2, 3, 4), np.inf), prepare_observation(z, PARAMS), PARAMS
+    ).tolist() == [0, 0]
+
+
+def test_bad_images_are_rejected():
+    with pytest.raises(ValueError, match="2-D"):
+        prepare_observation(np.ones(5), PARAMS)
+    with pytest.raises(ValueError, match="dtype"):
+        prepare_observation(np.ones((2, 2), np.uint16), PARAMS)
+    with pytest.raises(ValueError, match="shape"):
+        log_likelihoods(np.ones((2, 3, 3)), prepare_observation(np.ones((2, 2)), PARAMS), PARAMS)
+    with pytest.raises(ValueError, match="occlusion_probability"):
+        LikelihoodParams(occlusion_probability=1.0).validate()
