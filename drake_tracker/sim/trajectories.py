@@ -1,0 +1,130 @@
+"""Smooth joint trajectories for the simulated sequences (positions as functions of time).
+
+Every trajectory is a vectorised function ``positions(t) -> (T, n)`` of the robot's
+joints, in radians (metres for prismatic joints), built from a ``TrajectoryConfig``:
+
+* ``sinusoid``: joint k moves as ``home + A sin(2 pi t / T_k + k pi / 3)`` with
+  ``T_k = period_s (1 + 0.17 k)``, so the joints are not in lock step;
+* ``free``: a smooth random motion, per joint a sum of ``num_components`` sinusoids with
+  seeded frequencies (0.04-0.15 Hz times ``speed_scale``), phases and weights, peak
+  deviation ``amplitude_deg``;
+* ``in-out-in``: the free motion plus a smooth excursion of one joint (cosine ramps)
+  that takes the hand out of the camera view and back;
+* ``static``: the home pose.
+
+The world plays a cubic Hermite spline through samples of these functions
+(``sample_rate_hz`` knots per second), so the played motion is C1 and exact at knots.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_tracker.sim.scenario import RobotProfile, TrajectoryConfig
+
+
+def smooth_window(t: np.ndarray, start_s: float, duration_s: float, ramp_s: float) -> np.ndarray:
+    """0 before ``start_s``, a cosine ramp up to 1 over ``ramp_s``, 1 for ``duration_s``,
+    a cosine ramp back to 0. C1-continuous."""
+    t = np.asarray(t, float)
+
+    def ramp(x):
+        if ramp_s <= 0:
+            return (x >= 0).astype(float)
+        y = np.clip(x / ramp_s, 0.0, 1.0)
+        return 0.5 - 0.5 * np.cos(np.pi * y)
+
+    up = ramp(t - start_s)
+    down = ramp(t - (start_s + ramp_s + duration_s))
+    return up - down
+
+
+@dataclass
+class JointTrajectory:
+    """Positions of the robot's joints (``joint_names``) as a function of time."""
+
+    joint_names: list[str]
+    home: np.ndarray
+    kind: str
+    moved: np.ndarray  # indices of moved joints
+    amplitude: float
+    period_s: float
+    # free motion: per moved joint, (M,) frequencies (Hz), phases, weights
+    freqs: np.ndarray | None = None
+    phases: np.ndarray | None = None
+    weights: np.ndarray | None = None
+    excursion_index: int = -1
+    excursion: float = 0.0
+    excursion_window: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def positions(self, t) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, float))
+        q = np.tile(self.home, (len(t), 1))
+        if self.kind == "sinusoid":
+            for k, j in enumerate(self.moved):
+                period = self.period_s * (1.0 + 0.17 * k)
+                q[:, j] += self.amplitude * np.sin(2 * np.pi * t / period + k * np.pi / 3)
+        elif self.kind in ("free", "in-out-in"):
+            for k, j in enumerate(self.moved):
+                arg = 2 * np.pi * np.outer(t, self.freqs[k]) + self.phases[k]
+                q[:, j] += self.amplitude * (np.sin(arg) @ self.weights[k])
+            if self.kind == "in-out-in" and self.excursion_index >= 0:
+                q[:, self.excursion_index] += self.excursion * smooth_window(
+                    t, *self.excursion_window)
+        return q
+
+    def velocities(self, t, h: float = 1e-4) -> np.ndarray:
+        """Central differences of ``positions`` (the functions are smooth)."""
+        t = np.atleast_1d(np.asarray(t, float))
+        return (self.positions(t + h) - self.positions(t - h)) / (2 * h)
+
+
+def make_joint_trajectory(
+    config: TrajectoryConfig,
+    joint_names: list[str],
+    profile: RobotProfile | None,
+    seed: int,
+) -> JointTrajectory:
+    """The trajectory ``config`` describes for a robot with ``joint_names``."""
+    home_deg = dict(profile.home_deg) if profile else {}
+    home_deg.update(config.home_deg)
+    home = np.array([np.radians(home_deg.get(n, 0.0)) for n in joint_names])
+    moved_names = list(config.joints) or (profile.arm if profile else list(joint_names))
+    for n in moved_names:
+        if n not in joint_names:
+            raise ValueError(f"trajectory.joints: joint '{n}' not in {joint_names}")
+    moved = np.array([joint_names.index(n) for n in moved_names], int)
+    traj = JointTrajectory(
+        joint_names=list(joint_names), home=home, kind=config.kind, moved=moved,
+        amplitude=np.radians(config.amplitude_deg), period_s=config.period_s,
+    )
+    if config.kind in ("free", "in-out-in"):
+        rng = np.random.default_rng([seed, 0x7A1])
+        M = config.num_components
+        traj.freqs = config.speed_scale * rng.uniform(0.04, 0.15, (len(moved), M))
+        traj.phases = rng.uniform(0, 2 * np.pi, (len(moved), M))
+        w = rng.uniform(0.5, 1.0, (len(moved), M))
+        traj.weights = w / w.sum(axis=1, keepdims=True)
+    if config.kind == "in-out-in":
+        if config.excursion_joint not in joint_names:
+            raise ValueError(f"trajectory.excursion_joint: joint '{config.excursion_joint}' "
+                             f"not in {joint_names}")
+        traj.excursion_index = joint_names.index(config.excursion_joint)
+        traj.excursion = np.radians(config.excursion_deg)
+        traj.excursion_window = (config.excursion_start_s, config.excursion_duration_s,
+                                 config.excursion_ramp_s)
+    return traj
+
+
+def check_within_limits(q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                        joint_names: list[str]) -> None:
+    """Raises ValueError naming the first joint whose trajectory leaves its limits."""
+    bad = np.nonzero((q.min(axis=0) < lower) | (q.max(axis=0) > upper))[0]
+    if len(bad):
+        j = bad[0]
+        raise ValueError(
+            f"trajectory: joint '{joint_names[j]}' ranges over "
+            f"[{np.degrees(q[:, j].min()):.1f}, {np.degrees(q[:, j].max()):.1f}] deg, outside "
+            f"its limits [{np.degrees(lower[j]):.1f}, {np.degrees(upper[j]):.1f}] deg")
