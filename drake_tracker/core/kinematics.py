@@ -3,7 +3,7 @@
 The kinematic tree (joint types, axes, frame offsets, parent/child bodies) is read once
 from a finalized ``MultibodyPlant``; nothing is written by hand for a particular robot.
 Evaluating the poses of all bodies for N configurations loops over the joints only and
-is vectorised over the N configurations with numpy.
+runs in a numba kernel, in parallel over the N configurations.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit, prange
 from pydrake.multibody.tree import BodyIndex, JointIndex
 
 _REVOLUTE, _PRISMATIC, _WELD = 0, 1, 2
@@ -55,24 +56,118 @@ def _inv4(X: np.ndarray) -> np.ndarray:
     return out
 
 
-def _axis_transforms(kind: int, axis: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """X_FM(q) for all N values of q (N,) of a revolute or prismatic joint: (N, 4, 4)."""
-    n = q.shape[0]
-    X = np.zeros((n, 4, 4))
-    X[:, 3, 3] = 1.0
-    if kind == _PRISMATIC:
-        X[:, 0, 0] = X[:, 1, 1] = X[:, 2, 2] = 1.0
-        X[:, :3, 3] = q[:, None] * axis[None, :]
-        return X
-    # Rodrigues: R = I + sin(q) K + (1 - cos(q)) K^2, with K the cross matrix of axis.
-    K = np.array(
-        [[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]]
-    )
-    K2 = K @ K
-    s = np.sin(q)[:, None, None]
-    c1 = (1.0 - np.cos(q))[:, None, None]
-    X[:, :3, :3] = np.eye(3)[None] + s * K[None] + c1 * K2[None]
-    return X
+@njit(cache=True, inline="always")
+def _step_pose(X, n, s, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M):
+    """X[outboard] = X[inboard] @ A[s] @ X_FM(q) @ B[s] for particle n (3x4 parts only;
+    row 3 of every pose is [0, 0, 0, 1]). ``T`` and ``M`` are 4x4 scratch."""
+    i = inboard[s]
+    o = outboard[s]
+    # M = X[i] @ A[s]
+    for r in range(3):
+        for c in range(4):
+            M[r, c] = (X[i, r, 0] * A[s, 0, c] + X[i, r, 1] * A[s, 1, c]
+                       + X[i, r, 2] * A[s, 2, c])
+        M[r, 3] += X[i, r, 3]
+    k = kind[s]
+    if k == 2:  # weld: A[s] already holds X_PF @ X_FM, B[s] as usual
+        for r in range(3):
+            for c in range(4):
+                X[o, r, c] = M[r, 0] * B[s, 0, c] + M[r, 1] * B[s, 1, c] + M[r, 2] * B[s, 2, c]
+            X[o, r, 3] += M[r, 3]
+        return
+    qv = q[n, q_index[s]]
+    ax = axis[s, 0]
+    ay = axis[s, 1]
+    az = axis[s, 2]
+    if rev[s]:
+        qv = -qv
+    # T = X_FM(q) (inverse for reversed joints: negated angle / translation).
+    if k == 0:
+        sn = np.sin(qv)
+        c1 = 1.0 - np.cos(qv)
+        T[0, 0] = 1.0 - c1 * (ay * ay + az * az)
+        T[0, 1] = -sn * az + c1 * ax * ay
+        T[0, 2] = sn * ay + c1 * ax * az
+        T[1, 0] = sn * az + c1 * ax * ay
+        T[1, 1] = 1.0 - c1 * (ax * ax + az * az)
+        T[1, 2] = -sn * ax + c1 * ay * az
+        T[2, 0] = -sn * ay + c1 * ax * az
+        T[2, 1] = sn * ax + c1 * ay * az
+        T[2, 2] = 1.0 - c1 * (ax * ax + ay * ay)
+        T[0, 3] = 0.0
+        T[1, 3] = 0.0
+        T[2, 3] = 0.0
+    else:
+        for r in range(3):
+            for c in range(3):
+                T[r, c] = 1.0 if r == c else 0.0
+        T[0, 3] = qv * ax
+        T[1, 3] = qv * ay
+        T[2, 3] = qv * az
+    # X[o] = (M @ T) @ B[s]
+    for r in range(3):
+        m0 = M[r, 0] * T[0, 0] + M[r, 1] * T[1, 0] + M[r, 2] * T[2, 0]
+        m1 = M[r, 0] * T[0, 1] + M[r, 1] * T[1, 1] + M[r, 2] * T[2, 1]
+        m2 = M[r, 0] * T[0, 2] + M[r, 1] * T[1, 2] + M[r, 2] * T[2, 2]
+        m3 = M[r, 0] * T[0, 3] + M[r, 1] * T[1, 3] + M[r, 2] * T[2, 3] + M[r, 3]
+        for c in range(4):
+            X[o, r, c] = m0 * B[s, 0, c] + m1 * B[s, 1, c] + m2 * B[s, 2, c]
+        X[o, r, 3] += m3
+
+
+@njit(cache=True)
+def _body_poses_one(X, n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M):
+    for r in range(4):
+        for c in range(4):
+            X[0, r, c] = 1.0 if r == c else 0.0
+    for b in range(1, X.shape[0]):
+        X[b, 3, 0] = 0.0
+        X[b, 3, 1] = 0.0
+        X[b, 3, 2] = 0.0
+        X[b, 3, 3] = 1.0
+    for s in range(kind.shape[0]):
+        _step_pose(X, n, s, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
+
+
+@njit(parallel=True, cache=True)
+def _body_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev, out):
+    for n in prange(q.shape[0]):
+        T = np.empty((4, 4))
+        M = np.empty((4, 4))
+        _body_poses_one(out[n], n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
+
+
+@njit(parallel=True, cache=True)
+def _relative_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev,
+                           frame_body, X_BF, out):
+    """out[n, b] = inv(X_W_body(frame_body) @ X_BF) @ X_WB[n, b]."""
+    nb = out.shape[1]
+    for n in prange(q.shape[0]):
+        T = np.empty((4, 4))
+        M = np.empty((4, 4))
+        X = np.empty((nb, 4, 4))
+        _body_poses_one(X, n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
+        # M = X_WA = X[frame_body] @ X_BF, then T = inv(X_WA) (rigid).
+        f = frame_body
+        for r in range(3):
+            for c in range(4):
+                M[r, c] = (X[f, r, 0] * X_BF[0, c] + X[f, r, 1] * X_BF[1, c]
+                           + X[f, r, 2] * X_BF[2, c])
+            M[r, 3] += X[f, r, 3]
+        for r in range(3):
+            for c in range(3):
+                T[r, c] = M[c, r]
+            T[r, 3] = -(M[0, r] * M[0, 3] + M[1, r] * M[1, 3] + M[2, r] * M[2, 3])
+        Y = out[n]
+        for b in range(nb):
+            for r in range(3):
+                for c in range(4):
+                    Y[b, r, c] = T[r, 0] * X[b, 0, c] + T[r, 1] * X[b, 1, c] + T[r, 2] * X[b, 2, c]
+                Y[b, r, 3] += T[r, 3]
+            Y[b, 3, 0] = 0.0
+            Y[b, 3, 1] = 0.0
+            Y[b, 3, 2] = 0.0
+            Y[b, 3, 3] = 1.0
 
 
 class BatchedKinematics:
@@ -88,6 +183,22 @@ class BatchedKinematics:
         self._steps = steps
         self._num_positions = num_positions
         self._num_bodies = num_bodies
+        # The steps as flat arrays for the numba kernels. Welds fold X_FM into A; reversed
+        # joints use inv(X_FM(q)) = X_FM(-q) (a rotation or translation along the axis).
+        S = len(steps)
+        self._kind = np.array([s.kind for s in steps], dtype=np.int64).reshape(S)
+        self._inboard = np.array([s.inboard for s in steps], dtype=np.int64).reshape(S)
+        self._outboard = np.array([s.outboard for s in steps], dtype=np.int64).reshape(S)
+        self._q_index = np.array([max(s.q_index, 0) for s in steps], dtype=np.int64).reshape(S)
+        self._axis = np.array([s.axis for s in steps], dtype=float).reshape(S, 3)
+        self._A = np.array([s.A @ s.X_FM if s.kind == _WELD else s.A for s in steps],
+                           dtype=float).reshape(S, 4, 4)
+        self._B = np.array([s.B for s in steps], dtype=float).reshape(S, 4, 4)
+        self._rev = np.array([s.reversed for s in steps], dtype=np.bool_).reshape(S)
+
+    def _tables(self):
+        return (self._kind, self._inboard, self._outboard, self._q_index, self._axis,
+                self._A, self._B, self._rev)
 
     @staticmethod
     def from_plant(plant) -> BatchedKinematics:
@@ -177,20 +288,10 @@ class BatchedKinematics:
 
     def body_poses(self, q: np.ndarray) -> np.ndarray:
         """World poses X_WB of all bodies, (N, num_bodies, 4, 4), indexed by BodyIndex."""
-        q = self._check_q(q)
-        n = q.shape[0]
-        X = np.empty((n, self._num_bodies, 4, 4))
-        X[:, 0] = np.eye(4)
-        for s in self._steps:
-            X_in_A = X[:, s.inboard] @ s.A
-            if s.kind == _WELD:
-                X_FM = s.X_FM
-                X[:, s.outboard] = (X_in_A @ X_FM) @ s.B
-                continue
-            X_FM = _axis_transforms(s.kind, s.axis, q[:, s.q_index])
-            if s.reversed:
-                X_FM = _inv4(X_FM)
-            X[:, s.outboard] = (X_in_A @ X_FM) @ s.B
+        q = np.ascontiguousarray(self._check_q(q))
+        X = np.empty((q.shape[0], self._num_bodies, 4, 4))
+        if q.shape[0]:
+            _body_poses_kernel(q, *self._tables(), X)
         return X
 
     def frame_poses(self, q: np.ndarray, frame) -> np.ndarray:
@@ -200,7 +301,9 @@ class BatchedKinematics:
 
     def relative_poses(self, q: np.ndarray, frame_A) -> np.ndarray:
         """Poses X_AB of all bodies in frame A, (N, num_bodies, 4, 4)."""
-        X_WB = self.body_poses(q)
-        X_BF = _to4(frame_A.GetFixedPoseInBodyFrame())
-        X_WA = X_WB[:, int(frame_A.body().index())] @ X_BF
-        return _inv4(X_WA)[:, None] @ X_WB
+        q = np.ascontiguousarray(self._check_q(q))
+        out = np.empty((q.shape[0], self._num_bodies, 4, 4))
+        if q.shape[0]:
+            X_BF = np.ascontiguousarray(_to4(frame_A.GetFixedPoseInBodyFrame()))
+            _relative_poses_kernel(q, *self._tables(), int(frame_A.body().index()), X_BF, out)
+        return out
