@@ -24,6 +24,9 @@ class RobotMeshes:
     ``vertices`` (V, 3) float64, ``triangles`` (T, 3) int32 indices into ``vertices``,
     ``vertex_body`` (V,) int32 BodyIndex of each vertex (all vertices of a triangle
     share a body), ``triangle_body`` (T,) int32, ``names`` the geometry names.
+    ``triangle_closed`` (T,) bool: the triangle belongs to a closed, consistently oriented
+    surface and is wound counter-clockwise seen from outside, so a renderer may cull it
+    when it faces away from the camera (None: unknown, cull nothing).
     """
 
     vertices: np.ndarray
@@ -31,6 +34,7 @@ class RobotMeshes:
     vertex_body: np.ndarray
     triangle_body: np.ndarray
     names: list[str] = field(default_factory=list)
+    triangle_closed: np.ndarray | None = None
 
     @property
     def num_triangles(self) -> int:
@@ -206,6 +210,62 @@ def tessellate_shape(shape, segments: int = DEFAULT_SEGMENTS) -> tuple[np.ndarra
     raise ValueError(f"unsupported Drake shape for rendering: {type(shape).__name__}")
 
 
+# ----------------------------------------------------------------------------- orientation
+
+
+def orient_closed_mesh(vertices: np.ndarray, triangles: np.ndarray,
+                       decimals: int = 9) -> tuple[np.ndarray, bool]:
+    """Winds a closed mesh counter-clockwise seen from outside, if it is closed.
+
+    Vertices at the same position (to ``decimals``) are merged first, since OBJ files
+    repeat positions for per-face normals. The mesh is closed and consistently oriented if
+    every directed edge occurs exactly once and its reverse exactly once. Then each
+    connected component whose signed volume is negative (wound inwards, or mirrored by a
+    negative scale) has its triangles reversed. Returns ``(triangles, closed)``; an open
+    or inconsistent mesh comes back unchanged with ``closed = False``.
+    """
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if triangles.size == 0:
+        return triangles, False
+    _, weld = np.unique(np.round(np.asarray(vertices, float), decimals), axis=0,
+                        return_inverse=True)
+    weld = weld.reshape(-1)
+    t = weld[triangles]
+    if np.any((t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 2] == t[:, 0])):
+        return triangles, False  # degenerate triangles: do not trust the topology
+    edges = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    directed, counts = np.unique(edges, axis=0, return_counts=True)
+    if np.any(counts != 1):
+        return triangles, False
+    reverse = np.unique(edges[:, ::-1], axis=0)
+    if directed.shape != reverse.shape or np.any(directed != reverse):
+        return triangles, False
+    # Connected components over the welded vertices (union-find along edges).
+    parent = np.arange(int(weld.max()) + 1)
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for a, b in directed:
+        ra, rb = find(int(a)), find(int(b))
+        if ra != rb:
+            parent[ra] = rb
+    component = np.array([find(int(a)) for a in t[:, 0]])
+    v = np.asarray(vertices, float)
+    p0, p1, p2 = v[triangles[:, 0]], v[triangles[:, 1]], v[triangles[:, 2]]
+    centre = v.mean(axis=0)
+    volume6 = np.einsum("ij,ij->i", p0 - centre, np.cross(p1 - centre, p2 - centre))
+    out = triangles.copy()
+    for c in np.unique(component):
+        mask = component == c
+        if volume6[mask].sum() < 0.0:
+            out[mask] = out[mask][:, ::-1]
+    return out, True
+
+
 # ----------------------------------------------------------------------------- extraction
 
 
@@ -218,7 +278,7 @@ def extract_robot_meshes(plant, scene_graph, segments: int = DEFAULT_SEGMENTS) -
     ids = list(inspector.GetAllGeometryIds(Role.kPerception))
     if not ids:
         ids = list(inspector.GetAllGeometryIds(Role.kIllustration))
-    verts, tris, vbody, tbody, names = [], [], [], [], []
+    verts, tris, vbody, tbody, names, closed = [], [], [], [], [], []
     offset = 0
     for gid in ids:
         body = plant.GetBodyFromFrameId(inspector.GetFrameId(gid))
@@ -229,20 +289,24 @@ def extract_robot_meshes(plant, scene_graph, segments: int = DEFAULT_SEGMENTS) -
             continue
         X_BG = inspector.GetPoseInFrame(gid).GetAsMatrix4()
         v = v @ X_BG[:3, :3].T + X_BG[:3, 3]
+        t, is_closed = orient_closed_mesh(v, t)
         b = int(body.index())
         verts.append(v)
         tris.append(t + offset)
         vbody.append(np.full(len(v), b, dtype=np.int32))
         tbody.append(np.full(len(t), b, dtype=np.int32))
         names.append(inspector.GetName(gid))
+        closed.append(np.full(len(t), is_closed))
         offset += len(v)
     if not verts:
         return RobotMeshes(np.zeros((0, 3)), np.zeros((0, 3), np.int32),
-                           np.zeros(0, np.int32), np.zeros(0, np.int32), [])
+                           np.zeros(0, np.int32), np.zeros(0, np.int32), [],
+                           np.zeros(0, bool))
     return RobotMeshes(
         vertices=np.vstack(verts),
         triangles=np.vstack(tris).astype(np.int32),
         vertex_body=np.concatenate(vbody),
         triangle_body=np.concatenate(tbody),
         names=names,
+        triangle_closed=np.concatenate(closed),
     )

@@ -15,6 +15,7 @@ and pixels with no hit, or whose nearest hit is beyond ``far_m``, are ``inf``.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -24,20 +25,12 @@ from drake_tracker.core.kinematics import BatchedKinematics
 
 
 @njit(cache=True, inline="always")
-def _raster_triangle(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2,
-                     fx, fy, cx, cy, near, far):
-    """Rasterises one camera-frame triangle with all z >= near (approximately) into zbuf,
-    keeping the minimum depth. Depth is interpolated perspective-correctly as 1/z."""
+def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, bbox):
+    """Rasterises one projected triangle (pixel coordinates u, v and inverse depths
+    1/z of its vertices, all in front of the near plane up to rounding) into zbuf,
+    keeping the minimum depth. 1/z is affine in screen space (perspective-correct).
+    ``bbox`` (r_min, r_max, c_min, c_max) grows to cover the pixels that may be written."""
     H, W = zbuf.shape
-    iz0 = 1.0 / z0
-    iz1 = 1.0 / z1
-    iz2 = 1.0 / z2
-    u0 = fx * x0 * iz0 + cx
-    v0 = fy * y0 * iz0 + cy
-    u1 = fx * x1 * iz1 + cx
-    v1 = fy * y1 * iz1 + cy
-    u2 = fx * x2 * iz2 + cx
-    v2 = fy * y2 * iz2 + cy
     umin = min(u0, min(u1, u2))
     umax = max(u0, max(u1, u2))
     vmin = min(v0, min(v1, v2))
@@ -64,58 +57,116 @@ def _raster_triangle(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2,
     a2 = (v0 - v1) * inv_area
     b2 = (u1 - u0) * inv_area
     k2 = (u0 * v1 - u1 * v0) * inv_area
-    # 1/z is affine in screen space.
     ai = a0 * iz0 + a1 * iz1 + a2 * iz2
     bi = b0 * iz0 + b1 * iz1 + b2 * iz2
     ki = k0 * iz0 + k1 * iz1 + k2 * iz2
     eps = -1e-9
-    inv_near = 1.0 / near
-    inv_far = 1.0 / far
+    # near <= z <= far  <=>  1/far <= 1/z <= 1/near (with a little slack at near for
+    # triangles whose vertices were clipped exactly onto the near plane).
+    iz_hi = (1.0 / near) * (1.0 + 1e-9)
+    iz_lo = 1.0 / far
+    if r0 < bbox[0]:
+        bbox[0] = r0
+    if r1 > bbox[1]:
+        bbox[1] = r1
+    if c0 < bbox[2]:
+        bbox[2] = c0
+    if c1 > bbox[3]:
+        bbox[3] = c1
     for r in range(r0, r1 + 1):
         fr = float(r)
+        e0 = b0 * fr + k0
+        e1 = b1 * fr + k1
+        e2 = b2 * fr + k2
+        ei = bi * fr + ki
         for c in range(c0, c1 + 1):
             fc = float(c)
-            w0 = a0 * fc + b0 * fr + k0
-            if w0 < eps:
+            if a0 * fc + e0 < eps or a1 * fc + e1 < eps or a2 * fc + e2 < eps:
                 continue
-            w1 = a1 * fc + b1 * fr + k1
-            if w1 < eps:
+            iz = ai * fc + ei
+            if iz > iz_hi or iz < iz_lo or iz <= 0.0:
                 continue
-            w2 = a2 * fc + b2 * fr + k2
-            if w2 < eps:
-                continue
-            iz = ai * fc + bi * fr + ki
-            # near <= z <= far  <=>  1/far <= 1/z <= 1/near (with a little slack at near
-            # for triangles whose vertices were clipped exactly onto the near plane).
-            if iz > inv_near * (1.0 + 1e-9) or iz < inv_far or iz <= 0.0:
-                continue
-            z = 1.0 / iz
+            z = np.float32(1.0 / iz)
             if z < zbuf[r, c]:
                 zbuf[r, c] = z
 
 
-@njit(parallel=True, cache=True)
-def _render_kernel(X_CB, vertices, vertex_body, triangles, fx, fy, cx, cy, near, far, out):
-    N = X_CB.shape[0]
-    V = vertices.shape[0]
-    T = triangles.shape[0]
-    for n in prange(N):
-        zbuf = out[n]
-        zbuf[:, :] = np.inf
-        P = np.empty((V, 3))
-        for i in range(V):
-            b = vertex_body[i]
+@njit(cache=True, inline="always")
+def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, far, bbox):
+    iz0 = 1.0 / z0
+    iz1 = 1.0 / z1
+    iz2 = 1.0 / z2
+    _raster(zbuf, fx * x0 * iz0 + cx, fy * y0 * iz0 + cy, iz0,
+            fx * x1 * iz1 + cx, fy * y1 * iz1 + cy, iz1,
+            fx * x2 * iz2 + cx, fy * y2 * iz2 + cy, iz2, near, far, bbox)
+
+
+@njit(cache=True)
+def _render_one(zbuf, X, vertices, triangles, body_vertex_start, body_tri_start,
+                sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
+                planes, fx, fy, cx, cy, near, far, P, UV, poly, bbox):
+    """Renders one particle into ``zbuf`` (H, W) float32, which must hold inf (or
+    anything farther) where nothing was drawn yet. ``X`` (num_bodies, 4, 4) camera-frame
+    body poses. Vertices and triangles are grouped by body (``body_*_start`` delimit
+    them). A body is skipped when its bounding sphere lies outside the view frustum;
+    triangles of closed surfaces facing away from the camera are skipped unless the
+    body's sphere reaches the near plane (where clipping can expose back faces, or the
+    camera may be inside). ``P`` (V, 3), ``UV`` (V, 3) and ``poly`` (4, 3) are scratch."""
+    nb = body_tri_start.shape[0] - 1
+    for b in range(nb):
+        t_begin = body_tri_start[b]
+        t_end = body_tri_start[b + 1]
+        if t_begin == t_end:
+            continue
+        # Bounding sphere against near, far and the four side planes.
+        sx = sphere_center[b, 0]
+        sy = sphere_center[b, 1]
+        sz = sphere_center[b, 2]
+        cxb = X[b, 0, 0] * sx + X[b, 0, 1] * sy + X[b, 0, 2] * sz + X[b, 0, 3]
+        cyb = X[b, 1, 0] * sx + X[b, 1, 1] * sy + X[b, 1, 2] * sz + X[b, 1, 3]
+        czb = X[b, 2, 0] * sx + X[b, 2, 1] * sy + X[b, 2, 2] * sz + X[b, 2, 3]
+        rad = sphere_radius[b]
+        if czb + rad < near or czb - rad > far:
+            continue
+        outside = False
+        for k in range(4):
+            if planes[k, 0] * cxb + planes[k, 1] * cyb + planes[k, 2] * czb < -rad:
+                outside = True
+                break
+        if outside:
+            continue
+        all_front = czb - rad >= near
+        # Camera origin in the body frame: -R^T p.
+        ox = -(X[b, 0, 0] * X[b, 0, 3] + X[b, 1, 0] * X[b, 1, 3] + X[b, 2, 0] * X[b, 2, 3])
+        oy = -(X[b, 0, 1] * X[b, 0, 3] + X[b, 1, 1] * X[b, 1, 3] + X[b, 2, 1] * X[b, 2, 3])
+        oz = -(X[b, 0, 2] * X[b, 0, 3] + X[b, 1, 2] * X[b, 1, 3] + X[b, 2, 2] * X[b, 2, 3])
+        for i in range(body_vertex_start[b], body_vertex_start[b + 1]):
             px = vertices[i, 0]
             py = vertices[i, 1]
             pz = vertices[i, 2]
-            for k in range(3):
-                P[i, k] = (X_CB[n, b, k, 0] * px + X_CB[n, b, k, 1] * py
-                           + X_CB[n, b, k, 2] * pz + X_CB[n, b, k, 3])
-        poly = np.empty((4, 3))
-        for t in range(T):
+            x = X[b, 0, 0] * px + X[b, 0, 1] * py + X[b, 0, 2] * pz + X[b, 0, 3]
+            y = X[b, 1, 0] * px + X[b, 1, 1] * py + X[b, 1, 2] * pz + X[b, 1, 3]
+            z = X[b, 2, 0] * px + X[b, 2, 1] * py + X[b, 2, 2] * pz + X[b, 2, 3]
+            P[i, 0] = x
+            P[i, 1] = y
+            P[i, 2] = z
+            if all_front:
+                iz = 1.0 / z
+                UV[i, 0] = fx * x * iz + cx
+                UV[i, 1] = fy * y * iz + cy
+                UV[i, 2] = iz
+        for t in range(t_begin, t_end):
+            if all_front and tri_closed[t]:
+                if (tri_normal[t, 0] * ox + tri_normal[t, 1] * oy + tri_normal[t, 2] * oz
+                        <= tri_offset[t]):
+                    continue  # back face
             ia = triangles[t, 0]
             ib = triangles[t, 1]
             ic = triangles[t, 2]
+            if all_front:
+                _raster(zbuf, UV[ia, 0], UV[ia, 1], UV[ia, 2], UV[ib, 0], UV[ib, 1],
+                        UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, bbox)
+                continue
             za = P[ia, 2]
             zb = P[ib, 2]
             zc = P[ic, 2]
@@ -124,8 +175,8 @@ def _render_kernel(X_CB, vertices, vertex_body, triangles, fx, fy, cx, cy, near,
             if za > far and zb > far and zc > far:
                 continue
             if za >= near and zb >= near and zc >= near:
-                _raster_triangle(zbuf, P[ia, 0], P[ia, 1], za, P[ib, 0], P[ib, 1], zb,
-                                 P[ic, 0], P[ic, 1], zc, fx, fy, cx, cy, near, far)
+                _raster_xyz(zbuf, P[ia, 0], P[ia, 1], za, P[ib, 0], P[ib, 1], zb,
+                            P[ic, 0], P[ic, 1], zc, fx, fy, cx, cy, near, far, bbox)
                 continue
             # Clip against the near plane z = near (Sutherland-Hodgman): 3 or 4 vertices.
             m = 0
@@ -148,10 +199,87 @@ def _render_kernel(X_CB, vertices, vertex_body, triangles, fx, fy, cx, cy, near,
                     poly[m, 2] = near
                     m += 1
             for j in range(1, m - 1):
-                _raster_triangle(zbuf, poly[0, 0], poly[0, 1], poly[0, 2],
-                                 poly[j, 0], poly[j, 1], poly[j, 2],
-                                 poly[j + 1, 0], poly[j + 1, 1], poly[j + 1, 2],
-                                 fx, fy, cx, cy, near, far)
+                _raster_xyz(zbuf, poly[0, 0], poly[0, 1], poly[0, 2],
+                            poly[j, 0], poly[j, 1], poly[j, 2],
+                            poly[j + 1, 0], poly[j + 1, 1], poly[j + 1, 2],
+                            fx, fy, cx, cy, near, far, bbox)
+
+
+@njit(parallel=True, cache=True)
+def _render_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
+                   sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
+                   planes, fx, fy, cx, cy, near, far, num_chunks, out):
+    N = X_CB.shape[0]
+    V = vertices.shape[0]
+    for chunk in prange(num_chunks):
+        P = np.empty((V, 3))
+        UV = np.empty((V, 3))
+        poly = np.empty((4, 3))
+        bbox = np.empty(4, dtype=np.int64)
+        for n in range(chunk * N // num_chunks, (chunk + 1) * N // num_chunks):
+            zbuf = out[n]
+            zbuf[:, :] = np.inf
+            _render_one(zbuf, X_CB[n], vertices, triangles, body_vertex_start,
+                        body_tri_start, sphere_center, sphere_radius, tri_normal,
+                        tri_offset, tri_closed, planes, fx, fy, cx, cy, near, far,
+                        P, UV, poly, bbox)
+
+
+def _num_chunks(n: int) -> int:
+    """Particles are processed in this many contiguous chunks (scratch memory is per
+    chunk); a few per thread."""
+    return max(1, min(n, 4 * numba.get_num_threads()))
+
+
+def _frustum_planes(fx, fy, cx, cy, width, height, margin_px: float = 1.0) -> np.ndarray:
+    """Unit inward normals (4, 3) of the side planes (through the camera centre) of the
+    region that projects within ``margin_px`` of the sampled pixel coordinates
+    0..W-1, 0..H-1 (u = fx x/z + cx, v = fy y/z + cy)."""
+    lo_u, hi_u = -margin_px, width - 1.0 + margin_px
+    lo_v, hi_v = -margin_px, height - 1.0 + margin_px
+    planes = np.array([
+        [fx, 0.0, cx - lo_u],  # u >= lo_u
+        [-fx, 0.0, hi_u - cx],  # u <= hi_u
+        [0.0, fy, cy - lo_v],  # v >= lo_v
+        [0.0, -fy, hi_v - cy],  # v <= hi_v
+    ])
+    return planes / np.linalg.norm(planes, axis=1, keepdims=True)
+
+
+def _render_tables(meshes: RobotMeshes, num_bodies: int) -> tuple:
+    """The meshes regrouped by body, with per-body bounding spheres and per-triangle
+    planes, as the arguments of :func:`_render_one` after ``zbuf`` and ``X``."""
+    vertices = np.asarray(meshes.vertices, dtype=np.float64).reshape(-1, 3)
+    triangles = np.asarray(meshes.triangles, dtype=np.int64).reshape(-1, 3)
+    tri_body = np.asarray(meshes.triangle_body, dtype=np.int64).reshape(-1)
+    vertex_body = np.asarray(meshes.vertex_body, dtype=np.int64).reshape(-1)
+    closed = (np.zeros(len(triangles), bool) if meshes.triangle_closed is None
+              else np.asarray(meshes.triangle_closed, bool).reshape(-1))
+    if np.any(vertex_body[triangles] != tri_body[:, None]):
+        raise ValueError("each triangle's vertices must belong to the triangle's body")
+    v_order = np.argsort(vertex_body, kind="stable")
+    v_new = np.empty_like(v_order)
+    v_new[v_order] = np.arange(len(v_order))
+    t_order = np.argsort(tri_body, kind="stable")
+    vertices = np.ascontiguousarray(vertices[v_order])
+    triangles = np.ascontiguousarray(v_new[triangles[t_order]])
+    tri_body = tri_body[t_order]
+    closed = np.ascontiguousarray(closed[t_order])
+    vertex_body = vertex_body[v_order]
+    body_vertex_start = np.searchsorted(vertex_body, np.arange(num_bodies + 1)).astype(np.int64)
+    body_tri_start = np.searchsorted(tri_body, np.arange(num_bodies + 1)).astype(np.int64)
+    centers = np.zeros((num_bodies, 3))
+    radii = np.zeros(num_bodies)
+    for b in range(num_bodies):
+        v = vertices[body_vertex_start[b]:body_vertex_start[b + 1]]
+        if len(v):
+            centers[b] = 0.5 * (v.min(axis=0) + v.max(axis=0))
+            radii[b] = np.linalg.norm(v - centers[b], axis=1).max() * (1.0 + 1e-9) + 1e-9
+    p0, p1, p2 = (vertices[triangles[:, k]] for k in range(3))
+    normals = np.ascontiguousarray(np.cross(p1 - p0, p2 - p0))
+    offsets = np.einsum("ij,ij->i", normals, p0)
+    return (vertices, triangles, body_vertex_start, body_tri_start, centers, radii,
+            normals, offsets, closed)
 
 
 class BatchedDepthRenderer:
@@ -177,9 +305,14 @@ class BatchedDepthRenderer:
         self.kinematics = BatchedKinematics.from_plant(model.plant)
         self.meshes: RobotMeshes = extract_robot_meshes(model.plant, model.scene_graph,
                                                         segments)
-        self._vertices = np.ascontiguousarray(self.meshes.vertices, dtype=np.float64)
-        self._vertex_body = np.ascontiguousarray(self.meshes.vertex_body, dtype=np.int64)
-        self._triangles = np.ascontiguousarray(self.meshes.triangles, dtype=np.int64)
+        self._tables = _render_tables(self.meshes, self.kinematics.num_bodies)
+        k = intrinsics
+        self._fx = float(k.fx)
+        self._fy = float(k.fy)
+        self._cx = float(k.cx) - self.pixel_center_offset
+        self._cy = float(k.cy) - self.pixel_center_offset
+        self._planes = _frustum_planes(self._fx, self._fy, self._cx, self._cy,
+                                       k.width, k.height)
 
     @property
     def num_triangles(self) -> int:
@@ -201,8 +334,6 @@ class BatchedDepthRenderer:
         out = np.empty((X_CB.shape[0], k.height, k.width), dtype=np.float32)
         if X_CB.shape[0] == 0:
             return out
-        _render_kernel(X_CB, self._vertices, self._vertex_body, self._triangles,
-                       float(k.fx), float(k.fy), float(k.cx) - self.pixel_center_offset,
-                       float(k.cy) - self.pixel_center_offset,
-                       self.near_m, self.far_m, out)
+        _render_kernel(X_CB, *self._tables, self._planes, self._fx, self._fy, self._cx,
+                       self._cy, self.near_m, self.far_m, _num_chunks(X_CB.shape[0]), out)
         return out
