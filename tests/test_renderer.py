@@ -72,3 +72,46 @@ def test_benchmark_reports_the_documented_keys(model):
     for key in ("batched_us_per_image", "drake_us_per_image", "renderer_speedup_vs_drake"):
         assert np.isfinite(result[key]) and result[key] > 0
     assert result["hit_mismatch_fraction"] <= 0.02
+
+
+def _observation_of(renderer, q_true, rng, background_m=2.5):
+    """A noisy depth image of q_true in front of a wall, with a box occluding a patch."""
+    depth = renderer.render(q_true)[0].astype(np.float64)
+    depth[~np.isfinite(depth)] = background_m
+    depth += rng.normal(0.0, 0.004, size=depth.shape)
+    h, w = depth.shape
+    depth[h // 3:h // 2, w // 3:w // 2] = 0.6  # occluder in front of everything
+    depth[:2, :] = np.nan  # invalid pixels
+    depth[-1, :5] = 9.0  # beyond Z_max
+    return depth.astype(np.float32)
+
+
+@pytest.mark.parametrize("stride", [8, 4], ids=["80x60", "160x120"])
+def test_fused_render_likelihood_equals_render_then_likelihood(model, configurations, stride):
+    from drake_tracker.core.likelihood import (
+        LikelihoodParams,
+        log_likelihoods,
+        prepare_observation,
+    )
+
+    renderer = BatchedDepthRenderer(model, FULL.subsampled(stride))
+    rng = np.random.default_rng(3)
+    q_true = default_view_configuration(model)
+    q = np.vstack([q_true, configurations,
+                   q_true + rng.normal(0.0, 0.03, size=(40, len(q_true)))])
+    for params in (LikelihoodParams(), LikelihoodParams(
+            tail_weight=0.05, depth_noise_std_m=0.01, depth_noise_factor_per_m=0.0,
+            occluder_rate_per_m=2.0, occlusion_probability=0.3)):
+        observation = prepare_observation(_observation_of(renderer, q_true, rng), params)
+        expected = log_likelihoods(renderer.render(q), observation, params)
+        fused = renderer.log_likelihoods(q, observation, params)
+        assert fused.shape == (len(q),)
+        assert np.ptp(expected) > 1.0  # the particles are actually told apart
+        np.testing.assert_allclose(fused, expected, rtol=1e-9, atol=1e-9)
+        # Particles are independent of their batch.
+        np.testing.assert_allclose(renderer.log_likelihoods(q[5:9], observation, params),
+                                   expected[5:9], rtol=1e-9, atol=1e-9)
+    assert renderer.log_likelihoods(q[:0], observation, params).shape == (0,)
+    with pytest.raises(ValueError, match="shape"):
+        wrong = prepare_observation(np.ones((7, 9), np.float32), LikelihoodParams())
+        renderer.log_likelihoods(q, wrong, LikelihoodParams())

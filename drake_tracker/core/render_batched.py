@@ -322,6 +322,15 @@ class BatchedDepthRenderer:
         X_CB = self.kinematics.relative_poses(q, self.model.camera_frame)
         return self.render_camera_poses(X_CB)
 
+    def log_likelihoods(self, q: np.ndarray, observation, params) -> np.ndarray:
+        """(N,) image log-likelihoods of configurations q (N, nq) for a
+        ``likelihood.PreparedObservation``: FK, rendering and scoring fused in one numba
+        kernel (no (N, H, W) images in memory). Equal to
+        ``likelihood.log_likelihoods(self.render(q), observation, params)``."""
+        from drake_tracker.core.render_likelihood import fused_log_likelihoods
+
+        return fused_log_likelihoods(self, q, observation, params)
+
     def render_camera_poses(self, X_CB: np.ndarray) -> np.ndarray:
         """Renders from body poses in the camera frame, (N, num_bodies, 4, 4)."""
         X_CB = np.ascontiguousarray(X_CB, dtype=np.float64)
