@@ -108,6 +108,17 @@ class BeliefBuffer:
         self._last_reading_time = -np.inf
         self._now = float(initial_time_s)
 
+    def __deepcopy__(self, memo) -> BeliefBuffer:
+        """A copy that shares the stored arrays: the buffer never modifies an array in
+        place (every update stores a new one), so sharing them is safe and makes copying a
+        Drake Context holding a buffer cost a few list copies, not a deep copy."""
+        clone = object.__new__(BeliefBuffer)
+        clone.__dict__.update(self.__dict__)
+        clone._events = list(self._events)
+        clone._beliefs = list(self._beliefs)
+        clone._times = list(self._times)
+        return clone
+
     # ----------------------------------------------------------------- queries
     @property
     def now_s(self) -> float:
@@ -155,7 +166,7 @@ class BeliefBuffer:
             raise StaleReadingError(
                 f"joint reading stamped {t} s is not after the previous one "
                 f"({self._last_reading_time} s)")
-        reading = self.bank.check_reading(reading)
+        reading = self.bank.check_reading(reading).copy()
         k, t0, belief = self._latest_at_or_before(t)
         self._insert(k, _Event(float(t), reading=reading), self.bank.step(belief, t - t0, reading))
         self._last_reading_time = float(t)
@@ -165,30 +176,43 @@ class BeliefBuffer:
         self._prune()
         return self._beliefs[-1]
 
+    def image_time_problem(self, t: float) -> str | None:
+        """Why an image stamped ``t`` cannot be applied (too old, from the future, not
+        finite), or None when it can."""
+        if not np.isfinite(t):
+            return f"its time stamp {t} is not finite"
+        if t < self._anchor_time:
+            return (f"stamped {t:.4f} s, it is older than the {self.horizon_s:.3f} s buffer "
+                    f"horizon (oldest belief {self._anchor_time:.4f} s)")
+        if t > self._now + 1e-9:
+            return f"stamped {t:.4f} s, it is from the future (now {self._now:.4f} s)"
+        return None
+
     def add_image(self, t: float, update: ImageUpdate) -> bool:
         """Applies an image stamped ``t`` at ``t`` and replays what came after.
 
         Returns False (with a logged warning, nothing changed) for an image older than the
         horizon or from the future.
         """
-        if not np.isfinite(t):
-            log.warning("image skipped: time stamp %s is not finite", t)
+        problem = self.image_time_problem(t)
+        if problem is not None:
+            log.warning("image skipped: %s", problem)
             return False
-        if t < self._anchor_time:
-            log.warning("image stamped %.4f s skipped: older than the %.3f s buffer horizon "
-                        "(oldest belief %.4f s)", t, self.horizon_s, self._anchor_time)
-            return False
-        if t > self._now + 1e-9:
-            log.warning("image stamped %.4f s skipped: it is from the future (now %.4f s)",
-                        t, self._now)
-            return False
+        prior = self.belief_at(t)
+        mean_post, var_post = update(prior)
+        self.add_observation(t, AngleObservation.from_posterior(prior, mean_post, var_post))
+        return True
+
+    def add_observation(self, t: float, observation: AngleObservation) -> None:
+        """Inserts an image's pseudo-observation at ``t`` and replays what came after.
+        Raises ValueError when ``t`` is outside the buffer (see ``image_time_problem``)."""
+        problem = self.image_time_problem(t)
+        if problem is not None:
+            raise ValueError(f"image observation rejected: {problem}")
         k, t0, belief = self._latest_at_or_before(t)
         prior = self.bank.predict(belief, t - t0)
-        mean_post, var_post = update(prior)
-        observation = AngleObservation.from_posterior(prior, mean_post, var_post)
         self._insert(k, _Event(float(t), observation=observation), observation.apply(prior))
         self._replay_from(k + 1)
-        return True
 
     # ----------------------------------------------------------------- internals
     def _insert(self, k: int, event: _Event, belief: np.ndarray) -> None:

@@ -11,7 +11,6 @@ Each pixel scores ``log(p(z|d) / p_occ(z|∞))``: pixels where nothing is render
 invalid pixels (NaN, <= 0, > Z_max) score 0. A particle's log-likelihood is the sum.
 """
 
-from __future__ import annotations
 
 import math
 from dataclasses import dataclass

@@ -1,0 +1,263 @@
+"""The tracker's parameters: dataclasses that load from YAML with ``yaml_load_typed``.
+
+Units are in the field names: ``_rad`` (rad, or m for the prismatic virtual joints),
+``_per_sqrt_s`` (standard deviation growth per square root of a second), ``_per_s``,
+``_m``, ``_s``, ``_px``. The paper's models (SPEC §2) are written per second; dbrt's
+per-message values were converted and then chosen by measurement (see ``docs/``).
+
+Example YAML (every field optional)::
+
+    kalman:
+      robot_joints: {bias_decay_per_s: 0.9}
+      overrides:
+        head_pan: {has_bias: false}
+    image:
+      num_particles: 150
+      blocks: per-joint
+"""
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from drake_tracker.core.kalman import KalmanBankParams
+from drake_tracker.core.likelihood import LikelihoodParams
+from drake_tracker.robot import VIRTUAL_JOINT_NAMES
+
+#: Names accepted by ``ImageParams.blocks`` besides an explicit list of joint groups.
+BLOCK_MODES = ("per-joint", "arm-camera", "single")
+
+
+@dataclass
+class JointNoise:
+    """Noise model of one joint's (angle, bias) Kalman filter (SPEC §2, eqs. 3-5)."""
+
+    #: σq: encoder white noise (rad).
+    encoder_noise_std_rad: float = 2e-4
+    #: σa: angle random-walk growth (rad/√s). Large: the angle follows the encoder.
+    angle_process_std_rad_per_sqrt_s: float = 10.0
+    #: σb: bias random-walk growth (rad/√s). It sets how far each image may move the
+    #: angle (about σb/√30 ≈ 0.5 deg at 30 images/s): measured, a wide per-image search
+    #: (0.1-0.2) lets the coordinate-wise sampler trade one joint's error for another's
+    #: and drift, and a narrow one (0.02) converges slowly from a large bias.
+    bias_process_std_rad_per_sqrt_s: float = 0.05
+    #: c: fraction of the bias that remains after one second, in (0, 1].
+    bias_decay_per_s: float = 0.9
+    #: False: the joint is trusted (its bias is held at 0).
+    has_bias: bool = True
+    #: Prior standard deviations at the first reading (rad).
+    initial_angle_std_rad: float = 0.035
+    initial_bias_std_rad: float = 0.035
+
+
+def _virtual_joint_noise() -> JointNoise:
+    # The "reading" of a virtual joint is always 0, so its bias absorbs the offset: the
+    # angle moves slowly (the camera offset is nearly constant) and starts wide enough
+    # to cover a few centimetres and degrees of mounting error.
+    return JointNoise(
+        encoder_noise_std_rad=1e-4,
+        angle_process_std_rad_per_sqrt_s=0.015,
+        bias_process_std_rad_per_sqrt_s=0.01,
+        bias_decay_per_s=0.9,
+        has_bias=True,
+        initial_angle_std_rad=0.01,
+        initial_bias_std_rad=0.01,
+    )
+
+
+@dataclass
+class KalmanConfig:
+    """Per-joint filter parameters: defaults for robot and virtual joints, and overrides."""
+
+    robot_joints: JointNoise = field(default_factory=JointNoise)
+    virtual_joints: JointNoise = field(default_factory=_virtual_joint_noise)
+    #: Joint name -> its own parameters (replacing the group default).
+    overrides: dict[str, JointNoise] = field(default_factory=dict)
+
+
+@dataclass
+class ImageParams:
+    """The Coordinate Particle Filter image update."""
+
+    #: False: images are ignored (the encoders-only method).
+    enabled: bool = True
+    #: Particles per block; likelihood evaluations per image = particles x blocks.
+    num_particles: int = 150
+    #: ``per-joint`` (one block per joint, base to tip, then the camera offset),
+    #: ``arm-camera`` (robot joints, then the 6 virtual joints), ``single``, or an
+    #: explicit list of blocks given as joint-name lists in ``block_joints``.
+    blocks: str = "per-joint"
+    block_joints: list[list[str]] = field(default_factory=list)
+    #: Resample when KL(weights || uniform) exceeds this (nats).
+    max_kl: float = 2.0
+    #: Images are subsampled to about this width (px) before the update (SPEC §4).
+    image_width_px: int = 80
+    #: Subtracted from each image's capture stamp to get its time t' (s).
+    image_time_offset_s: float = 0.0
+    #: Images closer than this to the previously processed one are skipped (s); 0 = all.
+    min_image_interval_s: float = 0.0
+    #: ``batched`` (numba rasteriser) or ``drake`` (RenderEngineVtk, the reference).
+    renderer: str = "batched"
+    near_m: float = 0.1
+    far_m: float = 6.0
+    #: Seed of the particle filter's random numbers (one stream per image sequence).
+    seed: int = 0
+    likelihood: LikelihoodParams = field(default_factory=LikelihoodParams)
+
+
+@dataclass
+class TrackerParams:
+    """Everything the tracker needs besides the robot model and the camera intrinsics."""
+
+    kalman: KalmanConfig = field(default_factory=KalmanConfig)
+    image: ImageParams = field(default_factory=ImageParams)
+    #: Estimate the six virtual camera joints (False: the camera stays nominal).
+    estimate_camera_offset: bool = True
+    #: False: joint readings are ignored (the vision-only method); then the angles'
+    #: prior comes from ``initial_positions_rad`` and the angle process noise.
+    use_joint_readings: bool = True
+    #: Vision-only start, joint name -> angle (rad); others start at 0.
+    initial_positions_rad: dict[str, float] = field(default_factory=dict)
+    #: The delay buffer keeps this much history (s); older images are rejected.
+    buffer_horizon_s: float = 1.0
+
+
+def load_tracker_params(path: str | Path | None = None) -> TrackerParams:
+    """Defaults, overridden by a YAML file when ``path`` is given; validated later against
+    a model by :func:`resolve_kalman_params`."""
+    params = TrackerParams()
+    if path is None:
+        return params
+    from pydrake.common.yaml import yaml_load_typed
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"tracker parameter file '{path}' does not exist")
+    try:
+        params = yaml_load_typed(filename=str(path), defaults=params)
+    except (RuntimeError, AssertionError, TypeError, ValueError) as err:
+        raise ValueError(f"{path}: cannot read tracker parameters: {err}") from err
+    validate_tracker_params(params)
+    return params
+
+
+def tracker_params_to_yaml(params: TrackerParams) -> str:
+    from pydrake.common.yaml import yaml_dump_typed
+
+    return yaml_dump_typed(params)
+
+
+def _check(cond: bool, where: str, value, why: str) -> None:
+    if not cond:
+        raise ValueError(f"{where} = {value!r}: {why}")
+
+
+def validate_joint_noise(noise: JointNoise, where: str) -> None:
+    for name in ("encoder_noise_std_rad", "angle_process_std_rad_per_sqrt_s",
+                 "initial_angle_std_rad"):
+        value = getattr(noise, name)
+        _check(math.isfinite(value) and value > 0, f"{where}.{name}", value, "must be > 0")
+    for name in ("bias_process_std_rad_per_sqrt_s", "initial_bias_std_rad"):
+        value = getattr(noise, name)
+        ok = math.isfinite(value) and (value > 0 if noise.has_bias else value >= 0)
+        _check(ok, f"{where}.{name}", value, "must be > 0 for a joint with bias")
+    c = noise.bias_decay_per_s
+    _check(0 < c <= 1, f"{where}.bias_decay_per_s", c, "c must be in (0, 1]")
+
+
+def validate_tracker_params(params: TrackerParams) -> None:
+    """Model-independent checks; raises ValueError naming the field."""
+    k = params.kalman
+    validate_joint_noise(k.robot_joints, "kalman.robot_joints")
+    validate_joint_noise(k.virtual_joints, "kalman.virtual_joints")
+    for name, noise in k.overrides.items():
+        validate_joint_noise(noise, f"kalman.overrides[{name}]")
+    im = params.image
+    _check(im.num_particles >= 1, "image.num_particles", im.num_particles, "must be >= 1")
+    _check(im.blocks in BLOCK_MODES or im.blocks == "explicit", "image.blocks", im.blocks,
+           f"must be one of {list(BLOCK_MODES)} or 'explicit'")
+    if im.blocks == "explicit":
+        _check(len(im.block_joints) > 0, "image.block_joints", im.block_joints,
+               "must list at least one block when image.blocks is 'explicit'")
+    _check(im.max_kl > 0, "image.max_kl", im.max_kl, "must be > 0")
+    _check(im.image_width_px >= 1, "image.image_width_px", im.image_width_px, "must be >= 1")
+    _check(math.isfinite(im.image_time_offset_s), "image.image_time_offset_s",
+           im.image_time_offset_s, "must be finite")
+    _check(im.min_image_interval_s >= 0, "image.min_image_interval_s",
+           im.min_image_interval_s, "must be >= 0")
+    _check(im.renderer in ("batched", "drake"), "image.renderer", im.renderer,
+           "must be 'batched' or 'drake'")
+    _check(0 < im.near_m < im.far_m, "image.near_m/far_m", (im.near_m, im.far_m),
+           "need 0 < near_m < far_m")
+    im.likelihood.validate()
+    _check(params.buffer_horizon_s > 0, "buffer_horizon_s", params.buffer_horizon_s,
+           "must be > 0")
+
+
+def joint_noise_for(params: TrackerParams, joint_names: list[str]) -> list[JointNoise]:
+    """The JointNoise of each joint; unknown override names raise ValueError."""
+    unknown = sorted(set(params.kalman.overrides) - set(joint_names))
+    if unknown:
+        raise ValueError(f"kalman.overrides: unknown joint names {unknown}; the model's "
+                         f"joints are {joint_names}")
+    out = []
+    for name in joint_names:
+        if name in params.kalman.overrides:
+            out.append(params.kalman.overrides[name])
+        elif name in VIRTUAL_JOINT_NAMES:
+            out.append(params.kalman.virtual_joints)
+        else:
+            out.append(params.kalman.robot_joints)
+    return out
+
+
+def resolve_kalman_params(params: TrackerParams, joint_names: list[str]) -> KalmanBankParams:
+    """The bank's per-joint arrays for ``joint_names`` (virtual joints included)."""
+    validate_tracker_params(params)
+    noise = joint_noise_for(params, joint_names)
+    has_bias = np.array([j.has_bias for j in noise], bool)
+    return KalmanBankParams(
+        encoder_noise_std=np.array([j.encoder_noise_std_rad for j in noise]),
+        angle_process_std=np.array([j.angle_process_std_rad_per_sqrt_s for j in noise]),
+        bias_process_std=np.where(
+            has_bias, [j.bias_process_std_rad_per_sqrt_s for j in noise], 0.0),
+        bias_decay_per_s=np.array([j.bias_decay_per_s for j in noise]),
+        has_bias=has_bias,
+        names=tuple(joint_names),
+    )
+
+
+def resolve_blocks(params: TrackerParams, joint_names: list[str],
+                   camera_chain: list[str] = ()) -> list[np.ndarray]:
+    """Index arrays of the CPF blocks. Without ``estimate_camera_offset`` the virtual
+    joints are left out of every block (they stay at their prior, 0).
+
+    ``per-joint`` samples the camera first: the robot joints that move the camera
+    (``camera_chain``, e.g. a pan-tilt head), then the virtual joints, then the other
+    joints from base to tip. Measured on Apollo, sampling the arm before the camera lets
+    the arm's base joints absorb the camera's error, and the estimate drifts.
+    """
+    im = params.image
+    virtual = [n for n in joint_names if n in VIRTUAL_JOINT_NAMES]
+    robot = [n for n in joint_names if n not in VIRTUAL_JOINT_NAMES]
+    if im.blocks == "per-joint":
+        chain = [n for n in robot if n in camera_chain]
+        rest = [n for n in robot if n not in camera_chain]
+        groups = [[n] for n in chain] + [[n] for n in virtual] + [[n] for n in rest]
+    elif im.blocks == "arm-camera":
+        groups = [robot, virtual]
+    elif im.blocks == "single":
+        groups = [robot + virtual]
+    else:
+        groups = [list(b) for b in im.block_joints]
+        for block in groups:
+            for name in block:
+                if name not in joint_names:
+                    raise ValueError(f"image.block_joints: unknown joint '{name}'; the "
+                                     f"model's joints are {joint_names}")
+    if not params.estimate_camera_offset:
+        groups = [[n for n in b if n not in VIRTUAL_JOINT_NAMES] for b in groups]
+    groups = [b for b in groups if b]
+    return [np.array([joint_names.index(n) for n in b], int) for b in groups]

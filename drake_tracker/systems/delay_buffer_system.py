@@ -1,0 +1,138 @@
+"""The delay buffer as a Drake LeafSystem: readings, beliefs, and delayed images."""
+
+from __future__ import annotations
+
+import copy
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from drake_tracker.core.belief_buffer import BeliefBuffer
+from drake_tracker.core.frames import DepthFrame
+from drake_tracker.params import TrackerParams
+from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
+from drake_tracker.tracker import full_reading, make_bank_and_prior
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class DelayBufferState:
+    """The system's abstract state (copied with the Context)."""
+
+    buffer: BeliefBuffer | None = None
+    last_reading_time_s: float = float("-inf")
+    last_observation_id: int = 0
+    correction: BeliefCorrection = field(default_factory=BeliefCorrection)
+
+    def __deepcopy__(self, memo) -> DelayBufferState:
+        # BeliefBuffer copies cheaply (shared immutable arrays); the rest is small.
+        return DelayBufferState(
+            buffer=copy.deepcopy(self.buffer, memo),
+            last_reading_time_s=self.last_reading_time_s,
+            last_observation_id=self.last_observation_id,
+            correction=self.correction,  # never mutated: replaced by a new one
+        )
+
+
+class DelayBufferSystem(LeafSystem):
+    """Keeps the joint readings and the belief after each over ``buffer_horizon_s``, and
+    applies each image's observation at the image's own time t', filtering the later
+    readings again (periodic unrestricted update).
+
+    .. pydrake_system::
+
+        name: DelayBufferSystem
+        input_ports:
+        - measured_position
+        - measurement_time
+        - image_observation
+        - depth_frame
+        output_ports:
+        - correction
+        - image_prior
+
+    ``image_observation`` is the CPF system's :class:`ImageObservationMessage`; each new
+    one is inserted at its time and yields a new ``correction`` (the present belief after
+    replay) for the Kalman bank. ``image_prior`` is the belief at the time t' of the image
+    on ``depth_frame`` (capture stamp minus ``image_time_offset_s``), or the reason there
+    is none (no reading yet, older than the horizon, from the future).
+
+    Images outside the buffer and readings with NaN or stale stamps are skipped with a
+    logged warning; nothing else is dropped.
+    """
+
+    def __init__(self, model, params: TrackerParams, period_s: float, offset_s: float = 0.0):
+        super().__init__()
+        if not period_s > 0:
+            raise ValueError(f"DelayBufferSystem: period_s must be > 0, got {period_s}")
+        self._model = model
+        self._params = params
+        make_bank_and_prior(model, params, None)  # validates the parameters now
+        self._state = self.DeclareAbstractState(AbstractValue.Make(DelayBufferState()))
+        self.DeclareVectorInputPort("measured_position", len(model.robot_joint_names))
+        self.DeclareVectorInputPort("measurement_time", 1)
+        self.DeclareAbstractInputPort("image_observation",
+                                      AbstractValue.Make(ImageObservationMessage()))
+        self.DeclareAbstractInputPort("depth_frame", AbstractValue.Make(DepthFrame.empty()))
+        state_ticket = {self.abstract_state_ticket(self._state)}
+        self.DeclareAbstractOutputPort(
+            "correction", lambda: AbstractValue.Make(BeliefCorrection()),
+            self._calc_correction, state_ticket)
+        self.DeclareAbstractOutputPort(
+            "image_prior", lambda: AbstractValue.Make(ImagePrior()), self._calc_prior,
+            state_ticket | {self.input_port_ticket(self.get_input_port(3).get_index())})
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
+
+    def _update(self, context, state):
+        s: DelayBufferState = state.get_mutable_abstract_state(int(self._state)).get_value()
+        t = float(self.get_input_port(1).Eval(context)[0])
+        if t > s.last_reading_time_s:
+            reading = np.array(self.get_input_port(0).Eval(context), float)
+            if not (np.isfinite(t) and np.all(np.isfinite(reading))):
+                log.warning("joint reading at %.4f s skipped: it is not finite", t)
+            elif self._params.use_joint_readings:
+                if s.buffer is None:
+                    bank, prior = make_bank_and_prior(self._model, self._params, reading)
+                    s.buffer = BeliefBuffer(bank, prior, t, self._params.buffer_horizon_s)
+                s.buffer.add_reading(t, full_reading(self._model, reading))
+                s.last_reading_time_s = t
+            else:
+                if s.buffer is None:
+                    bank, prior = make_bank_and_prior(self._model, self._params, None)
+                    s.buffer = BeliefBuffer(bank, prior, 0.0, self._params.buffer_horizon_s)
+                s.buffer.advance_to(t)
+                s.last_reading_time_s = t
+        message = self.get_input_port(2).Eval(context)
+        if message.id > s.last_observation_id and message.observation is not None:
+            s.last_observation_id = message.id
+            problem = s.buffer.image_time_problem(message.image_time_s) if s.buffer else \
+                "no joint reading yet"
+            if problem is not None:
+                log.warning("image %d skipped: %s", message.sequence, problem)
+            else:
+                s.buffer.add_observation(message.image_time_s, message.observation)
+                now, belief = s.buffer.present()
+                s.correction = BeliefCorrection(s.correction.id + 1, now,
+                                                s.last_reading_time_s, belief)
+        state.get_mutable_abstract_state(int(self._state)).set_value(s)
+
+    def _calc_correction(self, context, output):
+        output.set_value(context.get_abstract_state(int(self._state)).get_value().correction)
+
+    def _calc_prior(self, context, output):
+        s: DelayBufferState = context.get_abstract_state(int(self._state)).get_value()
+        frame: DepthFrame = self.get_input_port(3).Eval(context)
+        if frame.is_empty:
+            output.set_value(ImagePrior())
+            return
+        t = float(frame.capture_time_s) - self._params.image.image_time_offset_s
+        if s.buffer is None:
+            output.set_value(ImagePrior(frame.sequence, t, None, "no joint reading yet"))
+            return
+        problem = s.buffer.image_time_problem(t)
+        belief = None if problem else s.buffer.belief_at(t)
+        output.set_value(ImagePrior(frame.sequence, t, belief, problem or ""))

@@ -1,0 +1,44 @@
+"""Values passed between the tracker's systems on abstract-valued ports.
+
+Each carries an ``id`` that grows by one per new message, so a receiver that remembers
+the last id it used can tell a new message from the same one seen again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_tracker.core.belief_buffer import AngleObservation
+
+
+@dataclass
+class BeliefCorrection:
+    """The delay buffer's present belief after it applied an image (id 0: none yet)."""
+
+    id: int = 0
+    time_s: float = float("nan")
+    #: Stamp of the latest joint reading the belief includes.
+    last_reading_time_s: float = float("-inf")
+    belief: np.ndarray | None = None
+
+
+@dataclass
+class ImagePrior:
+    """The belief at the time of the image on the depth port, or why there is none."""
+
+    sequence: int = -1
+    image_time_s: float = float("nan")
+    belief: np.ndarray | None = None
+    problem: str = "no image"
+
+
+@dataclass
+class ImageObservationMessage:
+    """An image's pseudo-observation of the joint angles, stamped with the image time."""
+
+    id: int = 0
+    sequence: int = -1
+    image_time_s: float = float("nan")
+    observation: AngleObservation | None = None

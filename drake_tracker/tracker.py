@@ -1,0 +1,280 @@
+"""The offline tracker: joint readings and depth images in, the current estimate out.
+
+:class:`Tracker` is the whole method as plain Python over numpy: a Kalman bank on
+(angle, bias) for every joint of the tracker's model (the robot's joints and the six
+virtual camera joints, whose "reading" is always 0, SPEC §4), a delay buffer, and the
+CPF image update. Readings and images may come in any interleaving: an image stamped
+``t'`` (its capture stamp minus ``image_time_offset_s``) is applied to the belief at
+``t'`` and the readings after it are filtered again.
+
+The Drake systems in ``drake_tracker.systems`` call the same pieces, and give the same
+estimates from the same data (``tests/test_systems_equivalence.py``).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.cpf import CPFResult
+from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.image_update import CpfImageUpdate
+from drake_tracker.core.kalman import (
+    MEAN_A,
+    MEAN_B,
+    VAR_A,
+    VAR_B,
+    JointKalmanBank,
+    initial_moments,
+)
+from drake_tracker.core.kinematics import BatchedKinematics
+from drake_tracker.params import (
+    TrackerParams,
+    joint_noise_for,
+    resolve_blocks,
+    resolve_kalman_params,
+    validate_tracker_params,
+)
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class TrackerEstimate:
+    """The tracker's belief at ``time_s``; angles in rad (m for prismatic joints)."""
+
+    time_s: float
+    joint_names: list[str]
+    positions: np.ndarray
+    position_variances: np.ndarray
+    biases: np.ndarray
+    bias_variances: np.ndarray
+    #: [x, y, z (m), rx, ry, rz (rad)]: the estimated camera relative to the nominal one.
+    camera_offset: np.ndarray
+    #: The hand (end-effector frame) in the estimated camera frame.
+    X_CE: np.ndarray
+    #: The hand in the robot model's world frame.
+    X_WE: np.ndarray
+
+
+def image_rng(seed: int, sequence: int) -> np.random.Generator:
+    """The CPF's random stream for image ``sequence``: independent of what came before,
+    so a re-simulated or replayed run draws the same numbers."""
+    return np.random.default_rng([int(seed), int(sequence), 0x5EED])
+
+
+class PoseReadout:
+    """X_CE and X_WE of joint positions, from the model's batched kinematics."""
+
+    def __init__(self, model):
+        self.model = model
+        self.kinematics = BatchedKinematics.from_plant(model.plant)
+
+    def poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = np.atleast_2d(q)
+        X_WC = self.kinematics.frame_poses(q, self.model.camera_frame)
+        X_WE = self.kinematics.frame_poses(q, self.model.end_effector_frame)
+        X_CE = np.linalg.inv(X_WC) @ X_WE
+        return X_CE, X_WE
+
+
+class ImageProcessor:
+    """Turns a depth frame and the prior at its time into a pseudo-observation.
+
+    Shared by the offline tracker and the Drake CPF system, so that both draw the same
+    random numbers and skip the same images.
+    """
+
+    def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams):
+        self.params = params
+        im = params.image
+        blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
+        self.update = CpfImageUpdate(
+            model, camera, blocks, im.num_particles,
+            im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m)
+
+    def image_time(self, frame: DepthFrame) -> float:
+        return float(frame.capture_time_s) - self.params.image.image_time_offset_s
+
+    def wants(self, frame: DepthFrame, last_processed_time_s: float) -> bool:
+        """Whether ``frame`` is due: images closer than ``min_image_interval_s`` to the
+        previously processed one are skipped."""
+        if frame.is_empty or not self.params.image.enabled:
+            return False
+        gap = self.image_time(frame) - last_processed_time_s
+        return gap >= self.params.image.min_image_interval_s - 1e-9
+
+    def observe(self, frame: DepthFrame, prior: np.ndarray
+                ) -> tuple[AngleObservation | None, CPFResult | None]:
+        """The image's observation relative to ``prior`` (None if it has no valid pixel)."""
+        observation = self.update.prepare(frame.depth_m)
+        result = self.update(prior, observation, image_rng(self.params.image.seed,
+                                                           frame.sequence))
+        if result is None:
+            return None, None
+        # A degenerate particle set would claim certainty; floor the posterior variance
+        # at the Monte-Carlo resolution of the prior.
+        floor = np.maximum(prior[VAR_A] / self.update.num_particles, 1e-14)
+        variance = np.maximum(result.variance, floor)
+        return AngleObservation.from_posterior(prior, result.mean, variance), result
+
+
+def make_bank_and_prior(model, params: TrackerParams, first_reading: np.ndarray | None
+                        ) -> tuple[JointKalmanBank, np.ndarray]:
+    """The Kalman bank for ``model`` and the initial (5, n) belief: angles at the first
+    reading of the robot joints (or ``initial_positions_rad``), virtual joints at 0."""
+    validate_tracker_params(params)
+    names = model.joint_names
+    bank = JointKalmanBank(resolve_kalman_params(params, names))
+    noise = joint_noise_for(params, names)
+    mean = np.zeros(len(names))
+    unknown = sorted(set(params.initial_positions_rad) - set(names))
+    if unknown:
+        raise ValueError(f"initial_positions_rad: unknown joint names {unknown}")
+    for name, value in params.initial_positions_rad.items():
+        mean[names.index(name)] = value
+    if first_reading is not None:
+        robot = robot_joint_indices(model)
+        mean[robot] = first_reading
+    prior = initial_moments(mean, np.array([j.initial_angle_std_rad for j in noise]),
+                            np.array([j.initial_bias_std_rad for j in noise]),
+                            bank.params.has_bias)
+    return bank, prior
+
+
+def camera_chain_joints(model) -> list[str]:
+    """The robot joints that move the camera (e.g. a pan-tilt head), base first."""
+    plant = model.plant
+    camera_body = model.nominal_camera_frame.body().index()
+    chain = []
+    for name in model.robot_joint_names:
+        joint = plant.GetJointByName(name)
+        if camera_body in plant.GetBodiesKinematicallyAffectedBy([joint.index()]):
+            chain.append(name)
+    return chain
+
+
+def robot_joint_indices(model) -> np.ndarray:
+    """Indices of the robot (measured) joints within ``model.joint_names``."""
+    return np.array([model.joint_names.index(n) for n in model.robot_joint_names], int)
+
+
+def full_reading(model, robot_reading: np.ndarray) -> np.ndarray:
+    """The bank's reading vector: the robot joints' readings, 0 for the virtual joints."""
+    q = np.zeros(model.num_joints)
+    q[robot_joint_indices(model)] = robot_reading
+    return q
+
+
+def estimate_from_belief(model, readout: PoseReadout, time_s: float,
+                         belief: np.ndarray) -> TrackerEstimate:
+    X_CE, X_WE = readout.poses(belief[MEAN_A])
+    return TrackerEstimate(
+        time_s=float(time_s),
+        joint_names=list(model.joint_names),
+        positions=belief[MEAN_A].copy(),
+        position_variances=belief[VAR_A].copy(),
+        biases=belief[MEAN_B].copy(),
+        bias_variances=belief[VAR_B].copy(),
+        camera_offset=belief[MEAN_A, model.virtual_joint_indices].copy(),
+        X_CE=X_CE[0],
+        X_WE=X_WE[0],
+    )
+
+
+class Tracker:
+    """The offline tracker. Feed it ``add_reading`` and ``add_image`` in arrival order.
+
+    Args:
+        model: the tracker's model (``build_tracker_model``).
+        camera: intrinsics of the depth images that will be passed in.
+        params: tracker parameters.
+    """
+
+    def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams | None = None):
+        self.model = model
+        self.camera = camera
+        self.params = params if params is not None else TrackerParams()
+        validate_tracker_params(self.params)
+        self.readout = PoseReadout(model)
+        self.images = ImageProcessor(model, camera, self.params) \
+            if self.params.image.enabled else None
+        self.buffer: BeliefBuffer | None = None
+        self.last_image_time_s = -np.inf
+        self.last_result: CPFResult | None = None
+        self.num_images_applied = 0
+        self.num_images_skipped = 0
+        self._robot = robot_joint_indices(model)
+        if not self.params.use_joint_readings:
+            self._start(0.0, None)
+
+    def _start(self, t: float, first_reading: np.ndarray | None) -> None:
+        bank, prior = make_bank_and_prior(self.model, self.params, first_reading)
+        self.buffer = BeliefBuffer(bank, prior, t, self.params.buffer_horizon_s)
+
+    def add_reading(self, t: float, robot_reading: np.ndarray) -> None:
+        """An encoder reading of the robot joints (``model.robot_joint_names`` order),
+        stamped ``t`` (s). Raises ValueError for a wrong length, NaN, or a stale stamp."""
+        reading = np.asarray(robot_reading, float)
+        if reading.shape != (len(self._robot),):
+            raise ValueError(f"joint reading has shape {reading.shape}, expected "
+                             f"({len(self._robot)},) for joints {self.model.robot_joint_names}")
+        if not self.params.use_joint_readings:
+            if self.buffer is not None:
+                self.buffer.advance_to(t)
+            return
+        if self.buffer is None:
+            if not np.all(np.isfinite(reading)):
+                raise ValueError("joint reading is not finite")
+            self._start(t, reading)
+        self.buffer.add_reading(t, full_reading(self.model, reading))
+
+    def add_image(self, frame: DepthFrame) -> bool:
+        """A depth image (full resolution of ``camera``); True when it was applied.
+
+        Images before the first reading, older than the buffer horizon, from the future,
+        not due yet (``min_image_interval_s``) or without a valid pixel are skipped, with
+        a logged warning for the first three. A malformed image raises ValueError.
+        """
+        if self.images is None or frame.is_empty:
+            return False
+        self.images.update.prepare(frame.depth_m)  # validates before anything changes
+        if self.buffer is None:
+            log.warning("image %d skipped: no joint reading yet", frame.sequence)
+            self.num_images_skipped += 1
+            return False
+        t = self.images.image_time(frame)
+        if not self.params.use_joint_readings:
+            self.buffer.advance_to(max(t, frame.arrival_time_s))
+        if not self.images.wants(frame, self.last_image_time_s):
+            self.num_images_skipped += 1
+            return False
+        problem = self.buffer.image_time_problem(t)
+        if problem is not None:
+            log.warning("image %d skipped: %s", frame.sequence, problem)
+            self.num_images_skipped += 1
+            return False
+        observation, result = self.images.observe(frame, self.buffer.belief_at(t))
+        self.last_image_time_s = t
+        self.last_result = result
+        if observation is None:
+            self.num_images_skipped += 1
+            return False
+        self.buffer.add_observation(t, observation)
+        self.num_images_applied += 1
+        return True
+
+    @property
+    def started(self) -> bool:
+        return self.buffer is not None
+
+    def estimate(self) -> TrackerEstimate:
+        """The current estimate (after the latest reading)."""
+        if self.buffer is None:
+            raise RuntimeError("the tracker has no estimate before its first joint reading")
+        t, belief = self.buffer.present()
+        return estimate_from_belief(self.model, self.readout, t, belief)

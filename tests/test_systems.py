@@ -1,0 +1,163 @@
+"""The tracker's Drake systems: each through its ports, and the whole Diagram against
+the offline tracker on the same recorded data."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import VectorLogSink
+
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.kalman import MEAN_A, JointKalmanBank
+from drake_tracker.offline import replay_run
+from drake_tracker.params import TrackerParams, resolve_kalman_params
+from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.synthetic import synthetic_run
+from drake_tracker.systems.add_tracker import AddTracker
+from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
+from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
+from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage
+from drake_tracker.systems.recorded_run_source import RecordedRunSource
+from drake_tracker.tracker import full_reading, make_bank_and_prior
+
+CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
+
+
+@pytest.fixture(scope="module")
+def apollo():
+    return build_tracker_model(robot_preset("apollo"))
+
+
+def params(seed: int = 0) -> TrackerParams:
+    p = TrackerParams()
+    p.image.num_particles = 40
+    p.image.seed = seed
+    return p
+
+
+def test_kalman_bank_system_matches_the_bank_through_its_ports(apollo):
+    p = params()
+    system = JointKalmanBankSystem(apollo, p, period_s=0.01)
+    context = system.CreateDefaultContext()
+    n_robot = len(apollo.robot_joint_names)
+    system.GetInputPort("correction").FixValue(context, BeliefCorrection())
+    rng = np.random.default_rng(3)
+    readings = rng.normal(0.0, 0.3, (4, n_robot))
+    bank = JointKalmanBank(resolve_kalman_params(p, apollo.joint_names))
+    _, expected = make_bank_and_prior(apollo, p, readings[0])
+    simulator = Simulator(system, context)
+    last_t = 0.0
+    for k, reading in enumerate(readings):
+        t = 0.01 * k
+        system.GetInputPort("measured_position").FixValue(context, reading)
+        system.GetInputPort("measurement_time").FixValue(context, [t])
+        simulator.AdvanceTo(t + 0.005)
+        expected = bank.step(expected, t - last_t, full_reading(apollo, reading))
+        last_t = t
+        np.testing.assert_allclose(
+            system.GetOutputPort("estimated_position").Eval(context), expected[MEAN_A],
+            rtol=0, atol=1e-12)
+    # The same stamp again is not a new reading.
+    simulator.AdvanceTo(0.045)
+    np.testing.assert_allclose(system.GetOutputPort("belief").Eval(context),
+                               expected.ravel(), atol=1e-12)
+    X_CE = system.GetOutputPort("X_CE").Eval(context)
+    assert np.all(np.isfinite(X_CE.GetAsMatrix4()))
+    np.testing.assert_allclose(system.GetOutputPort("camera_offset").Eval(context),
+                               expected[MEAN_A, apollo.virtual_joint_indices], atol=1e-12)
+
+
+def test_kalman_bank_system_adopts_a_correction_and_skips_nan(apollo):
+    p = params()
+    system = JointKalmanBankSystem(apollo, p, period_s=0.01)
+    context = system.CreateDefaultContext()
+    n = apollo.num_joints
+    corrected = np.zeros((5, n))
+    corrected[MEAN_A] = 0.123
+    corrected[2] = 1e-4
+    system.GetInputPort("correction").FixValue(context, BeliefCorrection(1, 0.0, 0.0, corrected))
+    system.GetInputPort("measured_position").FixValue(
+        context, np.full(len(apollo.robot_joint_names), np.nan))
+    system.GetInputPort("measurement_time").FixValue(context, [0.0])
+    Simulator(system, context).AdvanceTo(0.005)
+    np.testing.assert_array_equal(system.GetOutputPort("estimated_position").Eval(context),
+                                  corrected[MEAN_A])
+
+
+def test_delay_buffer_system_reports_why_an_image_has_no_prior(apollo):
+    system = DelayBufferSystem(apollo, params(), period_s=0.01)
+    context = system.CreateDefaultContext()
+    system.GetInputPort("image_observation").FixValue(context, ImageObservationMessage())
+    frame = DepthFrame(0.0, 0.05, np.ones((60, 80), np.float32), 0)
+    system.GetInputPort("depth_frame").FixValue(context, frame)
+    prior = system.GetOutputPort("image_prior").Eval(context)
+    assert prior.belief is None and "no joint reading" in prior.problem
+    system.GetInputPort("measured_position").FixValue(
+        context, np.zeros(len(apollo.robot_joint_names)))
+    system.GetInputPort("measurement_time").FixValue(context, [0.0])
+    Simulator(system, context).AdvanceTo(0.005)
+    prior = system.GetOutputPort("image_prior").Eval(context)
+    assert prior.belief is not None and prior.belief.shape == (5, apollo.num_joints)
+    system.GetInputPort("depth_frame").FixValue(
+        context, DepthFrame(1.0, 1.0, np.ones((60, 80), np.float32), 1))
+    assert "future" in system.GetOutputPort("image_prior").Eval(context).problem
+
+
+def _simulate(apollo, run, p, h):
+    builder = DiagramBuilder()
+    source = builder.AddSystem(RecordedRunSource(run))
+    tracker = AddTracker(builder, apollo, run.camera_intrinsics, p,
+                         source.GetOutputPort("measured_position"),
+                         source.GetOutputPort("measurement_time"),
+                         source.GetOutputPort("depth_frame"), encoder_period_s=h)
+    logger = builder.AddSystem(VectorLogSink(apollo.num_joints))
+    builder.Connect(tracker.port("estimated_position"), logger.get_input_port())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    return diagram, simulator, tracker, logger
+
+
+def test_diagram_and_offline_tracker_give_the_same_estimates(apollo):
+    h = 1.0 / 200.0
+    run = synthetic_run(apollo, duration_s=0.6, encoder_rate_hz=200.0, seed=4)
+    p = params(seed=4)
+    diagram, simulator, tracker, logger = _simulate(apollo, run, p, h)
+    # Sample right after the bank's update at k*h + h/2 (the logger publishes each step).
+    sample_times = run.reading_times_s + 0.6 * h
+    offline = replay_run(run, p, apollo, sample_times_s=sample_times)
+    assert offline.num_images_applied > 10
+    context = simulator.get_mutable_context()
+    bank_context = tracker.kalman_bank.GetMyContextFromRoot(context)
+    diagram_q = []
+    for t in sample_times:
+        simulator.AdvanceTo(t)
+        diagram_q.append(tracker.port("estimated_position").Eval(bank_context).copy())
+    diagram_q = np.array(diagram_q)
+    # The Diagram applies an image at the first CPF tick after it arrives (<= h later),
+    # the offline tracker at once: compare where no image arrived in the last 2 ticks.
+    arrivals = run.image_arrival_times_s
+    settled = np.array([not np.any((arrivals > t - 2.5 * h) & (arrivals <= t))
+                        for t in sample_times])
+    assert settled.sum() > 0.6 * len(settled)
+    difference = np.abs(diagram_q[settled] - offline.positions[settled])
+    assert np.nanmax(difference) <= 1e-9, np.nanmax(difference)
+    # And the estimate really moved away from the raw readings (images were applied).
+    cpf_state = tracker.image_update.GetMyContextFromRoot(context).get_abstract_state(0)
+    assert cpf_state.get_value().images_applied == offline.num_images_applied
+
+
+def test_diagram_context_can_be_copied_and_resimulated(apollo):
+    h = 1.0 / 200.0
+    run = synthetic_run(apollo, duration_s=0.3, encoder_rate_hz=200.0, seed=5)
+    diagram, simulator, tracker, _ = _simulate(apollo, run, params(seed=5), h)
+    simulator.AdvanceTo(0.12)
+    saved = simulator.get_context().Clone()
+    simulator.AdvanceTo(0.25)
+    port = tracker.port("estimated_position")
+    first = port.Eval(tracker.kalman_bank.GetMyContextFromRoot(simulator.get_context())).copy()
+    simulator.get_mutable_context().SetTimeStateAndParametersFrom(saved)
+    simulator.Initialize()
+    simulator.AdvanceTo(0.25)
+    second = port.Eval(tracker.kalman_bank.GetMyContextFromRoot(simulator.get_context()))
+    np.testing.assert_array_equal(first, second)
