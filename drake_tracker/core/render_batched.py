@@ -73,22 +73,62 @@ def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, bbox):
         bbox[2] = c0
     if c1 > bbox[3]:
         bbox[3] = c1
+    # Per row, the exact run of columns where all three edge functions are >= eps, so
+    # that the work per row is proportional to the pixels covered (long thin triangles
+    # have bounding boxes far larger than themselves) and the inner loop has no edge
+    # tests. Edges with a_k == 0 constrain whole rows.
+    ia0 = 1.0 / a0 if a0 != 0.0 else 0.0
+    ia1 = 1.0 / a1 if a1 != 0.0 else 0.0
+    ia2 = 1.0 / a2 if a2 != 0.0 else 0.0
+    fc0 = float(c0)
+    fc1 = float(c1)
+    # The depth range tests are needed only if some vertex is outside [near, far]
+    # (1/z inside the triangle is a convex combination of the vertices' 1/z).
+    check_range = (max(iz0, max(iz1, iz2)) > iz_hi or min(iz0, min(iz1, iz2)) < iz_lo)
     for r in range(r0, r1 + 1):
         fr = float(r)
-        e0 = b0 * fr + k0
-        e1 = b1 * fr + k1
-        e2 = b2 * fr + k2
+        e0 = b0 * fr + k0 - eps
+        e1 = b1 * fr + k1 - eps
+        e2 = b2 * fr + k2 - eps
+        lo = fc0
+        hi = fc1
+        if a0 > 0.0:
+            lo = max(lo, -e0 * ia0)
+        elif a0 < 0.0:
+            hi = min(hi, -e0 * ia0)
+        elif e0 < 0.0:
+            continue
+        if a1 > 0.0:
+            lo = max(lo, -e1 * ia1)
+        elif a1 < 0.0:
+            hi = min(hi, -e1 * ia1)
+        elif e1 < 0.0:
+            continue
+        if a2 > 0.0:
+            lo = max(lo, -e2 * ia2)
+        elif a2 < 0.0:
+            hi = min(hi, -e2 * ia2)
+        elif e2 < 0.0:
+            continue
+        c_lo = int(np.ceil(lo))
+        c_hi = int(np.floor(hi))
+        if c_lo > c_hi:
+            continue
         ei = bi * fr + ki
-        for c in range(c0, c1 + 1):
-            fc = float(c)
-            if a0 * fc + e0 < eps or a1 * fc + e1 < eps or a2 * fc + e2 < eps:
-                continue
-            iz = ai * fc + ei
-            if iz > iz_hi or iz < iz_lo or iz <= 0.0:
-                continue
-            z = np.float32(1.0 / iz)
-            if z < zbuf[r, c]:
-                zbuf[r, c] = z
+        row = zbuf[r]
+        if check_range:
+            for c in range(c_lo, c_hi + 1):
+                iz = ai * float(c) + ei
+                if iz > iz_hi or iz < iz_lo or iz <= 0.0:
+                    continue
+                z = np.float32(1.0 / iz)
+                if z < row[c]:
+                    row[c] = z
+        else:
+            for c in range(c_lo, c_hi + 1):
+                z = np.float32(1.0 / (ai * float(c) + ei))
+                if z < row[c]:
+                    row[c] = z
 
 
 @njit(cache=True, inline="always")
