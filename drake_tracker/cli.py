@@ -1,4 +1,4 @@
-"""The ``drake-tracker`` command line: demo, record, track, bench.
+"""The ``drake-tracker`` command line: demo, record, track, bench, evaluate.
 
 Each subcommand's work lives in its own module; this file only parses arguments.
 """
@@ -69,10 +69,29 @@ def _add_bench(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _add_evaluate(sub) -> None:
+    p = sub.add_parser("evaluate", help="the paper's protocol: sequences x biases x methods")
+    p.add_argument("--out", default="out/evaluate", help="output folder (resumable)")
+    p.add_argument("--quick", action="store_true",
+                   help="short runs of each kind of sequence and bias (<= 15 min here)")
+    p.add_argument("--seeds", type=int, default=None,
+                   help="runs per scenario (default: 1 quick, 10 full)")
+    p.add_argument("--methods", default=None,
+                   help="comma-separated subset of the methods (default: all four)")
+    p.add_argument("--workers", type=int, default=2, help="processes (default: %(default)s)")
+
+    def run(args):
+        from drake_tracker.evaluate import run_evaluate
+
+        return run_evaluate(args)
+
+    p.set_defaults(func=run)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="drake-tracker", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    for add in (_add_demo, _add_record, _add_track, _add_bench):
+    for add in (_add_demo, _add_record, _add_track, _add_bench, _add_evaluate):
         add(sub)
     return parser
 

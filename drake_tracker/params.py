@@ -27,7 +27,7 @@ from drake_tracker.core.likelihood import LikelihoodParams
 from drake_tracker.robot import VIRTUAL_JOINT_NAMES
 
 #: Names accepted by ``ImageParams.blocks`` besides an explicit list of joint groups.
-BLOCK_MODES = ("per-joint", "arm-camera", "single")
+BLOCK_MODES = ("per-joint", "arm-camera", "single", "camera")
 
 
 @dataclass
@@ -86,7 +86,8 @@ class ImageParams:
     #: Particles per block; likelihood evaluations per image = particles x blocks.
     num_particles: int = 150
     #: ``per-joint`` (one block per joint, base to tip, then the camera offset),
-    #: ``arm-camera`` (robot joints, then the 6 virtual joints), ``single``, or an
+    #: ``arm-camera`` (robot joints, then the 6 virtual joints), ``single``, ``camera``
+    #: (only the virtual joints, one block each), or an
     #: explicit list of blocks given as joint-name lists in ``block_joints``.
     blocks: str = "per-joint"
     block_joints: list[list[str]] = field(default_factory=list)
@@ -250,6 +251,8 @@ def resolve_blocks(params: TrackerParams, joint_names: list[str],
         groups = [robot, virtual]
     elif im.blocks == "single":
         groups = [robot + virtual]
+    elif im.blocks == "camera":
+        groups = [[n] for n in virtual]
     else:
         groups = [list(b) for b in im.block_joints]
         for block in groups:

@@ -1,0 +1,327 @@
+"""``drake-tracker evaluate``: the paper's protocol (SPEC §5) on the simulated suite.
+
+Work is split into tasks, one per (sequence, bias variant, seed): a task simulates and
+records the run once (cached as ``runs/<task>.npz``), replays it through every method,
+and writes ``results/<task>.csv`` with the errors sampled at regular times. A task whose
+result file exists is skipped, so a stopped evaluation resumes where it stopped. Tasks
+run through an :class:`Executor` (default: a process pool); a cluster executor only has
+to provide ``map_unordered(function, tasks)``.
+
+Outputs in ``--out DIR``: ``errors.csv`` (all samples), ``summary.csv`` (columns
+``sequence,bias,method,metric,p1,p25,p50,p75,p99``), ``summary.txt``, box plots
+``boxplot_translation_mm.png`` / ``boxplot_rotation_deg.png`` and time series
+``timeseries_<sequence>_<bias>.png`` (bias changes as dotted lines, occlusion and
+out-of-view intervals shaded).
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drake_tracker.methods import METHODS, method_params
+from drake_tracker.metrics import PERCENTILES, percentile_summary, pose_errors
+
+#: The quick suite: each kind of sequence (sinusoid, free, fast, out of view, occlusion)
+#: with each bias variant, shortened.
+QUICK_SEQUENCES = ("s-full-arm", "s-head-arm", "arm++", "in-out-in", "occlusion")
+QUICK_DURATION_S = 12.0
+QUICK_IMAGE_INTERVAL_S = 0.1
+BIASES = ("none", "constant", "time-varying")
+#: Errors are sampled every this many seconds.
+SAMPLE_PERIOD_S = 0.05
+
+
+@dataclass(frozen=True)
+class Task:
+    sequence: str
+    bias: str
+    seed: int
+    duration_s: float | None
+    min_image_interval_s: float
+    methods: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return f"{self.sequence.replace('+', 'p')}__{self.bias}__seed{self.seed}"
+
+
+class Executor:
+    """Runs tasks; ``map_unordered`` yields each task's result as it finishes."""
+
+    def map_unordered(self, function: Callable, tasks: list) -> Iterator:
+        raise NotImplementedError
+
+
+class SerialExecutor(Executor):
+    def map_unordered(self, function, tasks):
+        for task in tasks:
+            yield function(task)
+
+
+class ProcessExecutor(Executor):
+    """A local process pool."""
+
+    def __init__(self, workers: int):
+        self.workers = workers
+
+    def map_unordered(self, function, tasks):
+        with ProcessPoolExecutor(max_workers=self.workers) as pool:
+            futures = [pool.submit(function, task) for task in tasks]
+            for future in as_completed(futures):
+                yield future.result()
+
+
+def _sample_times(run, period_s: float) -> np.ndarray:
+    start = run.truth_times_s[0]
+    return np.arange(start, run.truth_times_s[-1] + 1e-9, period_s)
+
+
+def evaluate_run(run, methods: Iterable[str], min_image_interval_s: float = 0.0,
+                 sample_period_s: float = SAMPLE_PERIOD_S) -> dict[str, dict[str, np.ndarray]]:
+    """Errors of each method on one recorded run, at regular sample times.
+
+    Returns {method: {"times_s", "translation_mm", "rotation_deg"}}.
+    """
+    from drake_tracker.offline import encoders_only_X_CE, model_for_run, replay_run
+
+    model = model_for_run(run)
+    times = _sample_times(run, sample_period_s)
+    truth_index = np.clip(np.searchsorted(run.truth_times_s, times), 0,
+                          len(run.truth_times_s) - 1)
+    X_true = run.truth_X_CE[truth_index]
+    out = {}
+    initial = {n: float(q) for n, q in zip(run.joint_names, run.truth_positions_rad[0])}
+    for method in methods:
+        if method == "encoders_only":
+            X = encoders_only_X_CE(run, model)[truth_index]
+        else:
+            params = method_params(method, initial_positions_rad=initial)
+            params.image.min_image_interval_s = min_image_interval_s
+            X = replay_run(run, params, model, sample_times_s=times).X_CE
+        ok = np.all(np.isfinite(X.reshape(len(X), -1)), axis=1)
+        t_err = np.full(len(times), np.nan)
+        r_err = np.full(len(times), np.nan)
+        t_err[ok], r_err[ok] = pose_errors(X[ok], X_true[ok])
+        out[method] = {"times_s": times, "translation_mm": t_err, "rotation_deg": r_err}
+    return out
+
+
+def run_task(task: Task, out_dir: Path) -> str:
+    """Simulates (or loads) the task's run, evaluates every method, writes its CSV."""
+    from drake_tracker.recording import RecordedRun
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario import load_scenario
+
+    result_path = out_dir / "results" / f"{task.name}.csv"
+    if result_path.exists():
+        return task.name
+    run_path = out_dir / "runs" / f"{task.name}.npz"
+    if run_path.exists():
+        run = RecordedRun.load(run_path)
+    else:
+        scenario = load_scenario(f"{task.sequence}/{task.bias}")
+        scenario.seed = task.seed
+        run = simulate_and_record(scenario, duration_s=task.duration_s)
+        run.save(run_path)
+    errors = evaluate_run(run, task.methods, task.min_image_interval_s)
+    tmp = result_path.with_suffix(".tmp")
+    tmp.parent.mkdir(parents=True, exist_ok=True)
+    with tmp.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["sequence", "bias", "method", "seed", "time_s", "translation_mm",
+                         "rotation_deg"])
+        for method, e in errors.items():
+            for t, tr, rot in zip(e["times_s"], e["translation_mm"], e["rotation_deg"]):
+                writer.writerow([task.sequence, task.bias, method, task.seed, f"{t:.4f}",
+                                 f"{tr:.4f}", f"{rot:.5f}"])
+    tmp.replace(result_path)  # atomic: a result file is always complete
+    return task.name
+
+
+class _TaskRunner:
+    """Picklable ``function(task)`` for process executors."""
+
+    def __init__(self, out_dir: Path):
+        self.out_dir = out_dir
+
+    def __call__(self, task: Task) -> str:
+        return run_task(task, self.out_dir)
+
+
+def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...]) -> list[Task]:
+    from drake_tracker.sim.scenario import SEQUENCES
+
+    if quick:
+        sequences, duration, interval = QUICK_SEQUENCES, QUICK_DURATION_S, QUICK_IMAGE_INTERVAL_S
+        num_seeds = seeds or 1
+    else:
+        sequences = tuple(s for s in SEQUENCES if s != "static")
+        duration, interval, num_seeds = None, 0.0, seeds or 10
+    return [Task(seq, bias, seed, duration, interval, methods)
+            for seq in sequences for bias in BIASES for seed in range(num_seeds)]
+
+
+def load_errors(out_dir: Path) -> list[dict]:
+    rows = []
+    for path in sorted((out_dir / "results").glob("*.csv")):
+        with path.open() as f:
+            rows.extend(csv.DictReader(f))
+    return rows
+
+
+def summarize(rows: list[dict]) -> list[dict]:
+    """Percentiles per (sequence, bias, method, metric) over all seeds and samples."""
+    groups: dict[tuple, list[tuple[float, float]]] = {}
+    for r in rows:
+        key = (r["sequence"], r["bias"], r["method"])
+        groups.setdefault(key, []).append((float(r["translation_mm"]), float(r["rotation_deg"])))
+    summary = []
+    for (seq, bias, method), values in sorted(groups.items()):
+        values = np.array(values)
+        for k, metric in enumerate(("translation_mm", "rotation_deg")):
+            s = percentile_summary(values[:, k])
+            summary.append({"sequence": seq, "bias": bias, "method": method, "metric": metric,
+                            **s})
+    return summary
+
+
+def write_summary(summary: list[dict], out_dir: Path) -> str:
+    columns = ["sequence", "bias", "method", "metric"] + [f"p{p}" for p in PERCENTILES]
+    with (out_dir / "summary.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns)
+        writer.writeheader()
+        for row in summary:
+            writer.writerow({k: (f"{v:.3f}" if isinstance(v, float) else v)
+                             for k, v in row.items()})
+    header = (f"{'sequence':<12} {'bias':<13} {'method':<19} {'metric':<15}"
+              + "".join(f"{'p' + str(p):>9}" for p in PERCENTILES))
+    lines = [header, "-" * len(header)]
+    for row in summary:
+        lines.append(f"{row['sequence']:<12} {row['bias']:<13} {row['method']:<19} "
+                     f"{row['metric']:<15}" + "".join(f"{row[f'p{p}']:>9.2f}"
+                                                      for p in PERCENTILES))
+    text = "\n".join(lines)
+    (out_dir / "summary.txt").write_text(text + "\n")
+    return text
+
+
+def plot_results(rows: list[dict], out_dir: Path) -> list[Path]:
+    """Box plots per metric (one box per method and sequence/bias) and time series."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    cases = sorted({(r["sequence"], r["bias"]) for r in rows})
+    methods = [m for m in METHODS if any(r["method"] == m for r in rows)]
+    colors = dict(zip(METHODS, ("0.6", "tab:blue", "tab:orange", "tab:green")))
+    for metric, unit in (("translation_mm", "translation error (mm)"),
+                         ("rotation_deg", "rotation error (deg)")):
+        fig, ax = plt.subplots(figsize=(max(8, 1.2 * len(cases)), 4.5))
+        width = 0.8 / max(1, len(methods))
+        for i, method in enumerate(methods):
+            data = []
+            for case in cases:
+                v = np.array([float(r[metric]) for r in rows
+                              if (r["sequence"], r["bias"]) == case and r["method"] == method])
+                data.append(v[np.isfinite(v)])
+            positions = np.arange(len(cases)) + (i - (len(methods) - 1) / 2) * width
+            bp = ax.boxplot(data, positions=positions, widths=width * 0.9, whis=(1, 99),
+                            showfliers=False, patch_artist=True)
+            for patch in bp["boxes"]:
+                patch.set_facecolor(colors[method])
+            ax.plot([], [], color=colors[method], lw=6, label=method)
+        ax.set_xticks(np.arange(len(cases)))
+        ax.set_xticklabels([f"{s}\n{b}" for s, b in cases], fontsize=7)
+        ax.set_yscale("log")
+        ax.set_ylabel(unit + ", whiskers p1-p99")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = out_dir / f"boxplot_{metric}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+    for seq, bias in cases:
+        written.append(_plot_time_series(rows, seq, bias, methods, colors, out_dir, plt))
+    return written
+
+
+def _plot_time_series(rows, seq, bias, methods, colors, out_dir, plt) -> Path:
+    from drake_tracker.sim.scenario import load_scenario
+
+    scenario = load_scenario(f"{seq}/{bias}", validate=False)
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    seed0 = min(int(r["seed"]) for r in rows if (r["sequence"], r["bias"]) == (seq, bias))
+    t_end = 0.0
+    for method in methods:
+        sel = [r for r in rows if (r["sequence"], r["bias"], r["method"], int(r["seed"]))
+               == (seq, bias, method, seed0)]
+        t = np.array([float(r["time_s"]) for r in sel])
+        e = np.array([float(r["translation_mm"]) for r in sel])
+        if len(t):
+            t_end = max(t_end, t[-1])
+        ax.plot(t, e, color=colors[method], label=method, lw=1)
+    if scenario.encoders.bias == "steps":
+        for k in range(1, int(t_end / scenario.encoders.step_period_s) + 1):
+            ax.axvline(k * scenario.encoders.step_period_s, color="k", ls=":", lw=0.8)
+    if scenario.occluder.enabled:
+        ax.axvspan(scenario.occluder.start_s, min(scenario.occluder.end_s, t_end),
+                   color="0.85", label="occluded")
+    if scenario.trajectory.kind == "in-out-in":
+        tr = scenario.trajectory
+        ax.axvspan(tr.excursion_start_s, min(t_end, tr.excursion_start_s
+                                             + 2 * tr.excursion_ramp_s + tr.excursion_duration_s),
+                   color="0.9", label="leaving / out of view")
+    ax.set_yscale("log")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("translation error (mm)")
+    ax.set_title(f"{seq} / {bias} (seed {seed0})")
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    path = out_dir / f"timeseries_{seq.replace('+', 'p')}_{bias}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def run_evaluate(args) -> int:
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    methods = tuple(args.methods.split(",")) if args.methods else METHODS
+    for m in methods:
+        if m not in METHODS:
+            raise SystemExit(f"unknown method '{m}'; known: {list(METHODS)}")
+    tasks = make_tasks(args.quick, args.seeds, methods)
+    todo = [t for t in tasks if not (out_dir / "results" / f"{t.name}.csv").exists()]
+    print(f"{len(tasks)} tasks, {len(tasks) - len(todo)} already done, {len(todo)} to run "
+          f"with {args.workers} worker(s)")
+    executor = SerialExecutor() if args.workers <= 1 else ProcessExecutor(args.workers)
+    start = time.perf_counter()
+    for done, name in enumerate(executor.map_unordered(_TaskRunner(out_dir), todo), 1):
+        elapsed = time.perf_counter() - start
+        bar = "#" * int(30 * done / max(1, len(todo)))
+        sys.stderr.write(f"\r[{bar:<30}] {done}/{len(todo)} {elapsed:6.0f} s  {name}    ")
+        sys.stderr.flush()
+    if todo:
+        sys.stderr.write("\n")
+    rows = load_errors(out_dir)
+    with (out_dir / "errors.csv").open("w", newline="") as f:
+        if rows:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+    summary = summarize(rows)
+    print(write_summary(summary, out_dir))
+    plot_results(rows, out_dir)
+    print(f"wrote {out_dir}/summary.csv, errors.csv and figures in "
+          f"{time.perf_counter() - start:.0f} s")
+    return 0
