@@ -10,7 +10,10 @@ The pixel term is the one of :mod:`drake_tracker.core.likelihood`, evaluated wit
 floating point operations, except that terms too small to change a sum are not computed:
 ``gauss_coeff * exp(-r²/2)`` and ``occ_coeff * Φ / (1 - e^{-λd})`` are skipped when they
 are below 2^-60 times the uniform term they are added to (so adding them would round to
-the same double), and Φ is taken as exactly 1 where erfc rounds to 2.
+the same double), and Φ is taken as exactly 1 where erfc rounds to 2. On [-6, 9], erfc
+is evaluated from a piecewise polynomial table (:func:`erfc_table`, absolute error about
+1e-15, 2-3x faster than libm's erfc), so the sums agree with ``log_likelihoods`` to about
+1e-13 relative rather than bit for bit.
 """
 
 from __future__ import annotations
@@ -25,13 +28,49 @@ from drake_tracker.core.render_batched import BatchedDepthRenderer, _num_chunks,
 
 _NEGLIGIBLE = 2.0**-60
 
+#: erfc table: [_ERFC_LO, _ERFC_HI) in pieces of width 1/_ERFC_PER_UNIT, each a
+#: polynomial of degree _ERFC_DEGREE in t in [-1, 1] interpolating erfc at Chebyshev nodes.
+_ERFC_LO, _ERFC_HI, _ERFC_PER_UNIT, _ERFC_DEGREE = -6.0, 9.0, 16, 9
+
+
+def erfc_table() -> np.ndarray:
+    """Monomial coefficients (pieces, degree + 1) of the piecewise interpolant of erfc
+    used by the fused kernel (see :func:`_erfc`)."""
+    pieces = int(round((_ERFC_HI - _ERFC_LO) * _ERFC_PER_UNIT))
+    k = np.arange(_ERFC_DEGREE + 1)
+    nodes = np.cos(np.pi * (k + 0.5) / (_ERFC_DEGREE + 1))
+    vander = np.vander(nodes, _ERFC_DEGREE + 1, increasing=True)
+    coeffs = np.empty((pieces, _ERFC_DEGREE + 1))
+    for i in range(pieces):
+        x = _ERFC_LO + (i + 0.5 * (nodes + 1.0)) / _ERFC_PER_UNIT
+        coeffs[i] = np.linalg.solve(vander, [math.erfc(v) for v in x])
+    return coeffs
+
+
+_ERFC_COEFFS = erfc_table()
+
+
+@njit(cache=True, inline="always")
+def _erfc(x, coeffs):
+    """erfc(x): from the table on [_ERFC_LO, _ERFC_HI), else libm."""
+    if x < _ERFC_LO or x >= _ERFC_HI:
+        return math.erfc(x)
+    u = (x - _ERFC_LO) * _ERFC_PER_UNIT
+    i = int(u)
+    t = 2.0 * (u - i) - 1.0
+    acc = coeffs[i, _ERFC_DEGREE]
+    for j in range(_ERFC_DEGREE - 1, -1, -1):
+        acc = acc * t + coeffs[i, j]
+    return acc
+
 
 @njit(parallel=True, cache=True)
 def _fused_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
                   sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
                   planes, fx, fy, cx, cy, near, far, num_chunks, height, width,
-                  pixel_slot, z, sigma, gauss_coeff, occ_coeff, log_p_occ_inf,
-                  uniform, lam, occlusion, gauss_skip, erfc_skip, out):
+                  pixel_slot, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
+                  log_p_occ_inf, uniform, lam, occlusion, gauss_skip, erfc_skip,
+                  erfc_coeffs, out):
     N = X_CB.shape[0]
     V = vertices.shape[0]
     inv_sqrt2 = 1.0 / math.sqrt(2.0)
@@ -61,21 +100,20 @@ def _fused_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
                     p = pixel_slot[r * width + c]
                     if p < 0:
                         continue
-                    s = sigma[p]
-                    zp = z[p]
-                    rr = (zp - d) / s
+                    dz = z[p] - d
+                    rr = dz * inv_sigma[p]
                     if 0.5 * rr * rr > gauss_skip:
                         p_vis = uniform
                     else:
                         p_vis = uniform + gauss_coeff[p] * math.exp(-0.5 * rr * rr)
-                    x = -(d - zp + lam * s * s) / s * inv_sqrt2
+                    x = (dz - lam_sigma2[p]) * (inv_sigma[p] * inv_sqrt2)
                     if x > erfc_skip:
                         if p_vis == uniform:
                             total += log_uniform - log_p_occ_inf[p]
                             continue
                         p_occ = uniform
                     else:
-                        phi = 1.0 if x < -6.0 else 0.5 * math.erfc(x)
+                        phi = 1.0 if x < -6.0 else 0.5 * _erfc(x, erfc_coeffs)
                         p_occ = uniform + occ_coeff[p] * phi / (1.0 - math.exp(-lam * d))
                     total += (math.log((1.0 - occlusion) * p_vis + occlusion * p_occ)
                               - log_p_occ_inf[p])
@@ -107,7 +145,8 @@ def fused_log_likelihoods(renderer: BatchedDepthRenderer, q: np.ndarray,
                           params: LikelihoodParams) -> np.ndarray:
     """(N,) log-likelihoods of configurations q (N, nq): FK, render and score in one pass.
 
-    Equal to ``log_likelihoods(renderer.render(q), observation, params)``.
+    Equal to ``log_likelihoods(renderer.render(q), observation, params)`` (to ~1e-13
+    relative).
     """
     k = renderer.intrinsics
     if tuple(observation.shape) != (k.height, k.width):
@@ -128,8 +167,11 @@ def fused_log_likelihoods(renderer: BatchedDepthRenderer, q: np.ndarray,
     _fused_kernel(X_CB, *renderer._tables, renderer._planes, renderer._fx, renderer._fy,
                   renderer._cx, renderer._cy, renderer.near_m, renderer.far_m,
                   _num_chunks(N), k.height, k.width, slot, f64(observation.z),
-                  f64(observation.sigma), f64(observation.gauss_coeff),
+                  1.0 / f64(observation.sigma),
+                  float(params.occluder_rate_per_m) * f64(observation.sigma) ** 2,
+                  f64(observation.gauss_coeff),
                   f64(observation.occ_coeff), f64(observation.log_p_occ_inf),
                   params.tail_weight / params.max_depth_m, float(params.occluder_rate_per_m),
-                  float(params.occlusion_probability), gauss_skip, erfc_skip, out)
+                  float(params.occlusion_probability), gauss_skip, erfc_skip, _ERFC_COEFFS,
+                  out)
     return out
