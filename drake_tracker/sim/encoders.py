@@ -64,11 +64,20 @@ def deterministic_bias(config: EncoderConfig, times_s: np.ndarray, num_joints: i
     return np.zeros((len(t), num_joints))
 
 
+def counter_generator(seed: int, index: int, stream: int = 0) -> np.random.Generator:
+    """A generator whose draws depend only on (seed, stream, index): counter-based Philox.
+
+    The index sits in the second counter word and Philox increments the first, so the
+    draws of index k never overlap those of index k+1 (up to 2^64 blocks per index).
+    """
+    bitgen = np.random.Philox(key=np.array([int(seed), int(stream)], np.uint64),
+                              counter=np.array([0, int(index), 0, 0], np.uint64))
+    return np.random.Generator(bitgen)
+
+
 def sample_normals(seed: int, index: int, size: int, stream: int = 0) -> np.ndarray:
-    """Standard normals that depend only on (seed, stream, index): counter-based Philox."""
-    bitgen = np.random.Philox(key=(int(seed) << 8) | int(stream),
-                              counter=np.array([int(index), 0, 0, 0], np.uint64))
-    return np.random.Generator(bitgen).standard_normal(size)
+    """Standard normals that depend only on (seed, stream, index); see counter_generator."""
+    return counter_generator(seed, index, stream).standard_normal(size)
 
 
 def quantize(values: np.ndarray, step: float) -> np.ndarray:

@@ -213,7 +213,7 @@ ROBOT_PROFILES: dict[str, RobotProfile] = {
         upper_arm=["arm_joint_1", "arm_joint_2", "arm_joint_3"],
         lower_arm=["arm_joint_4", "arm_joint_5", "arm_joint_6", "arm_joint_7"],
         head=["head_pan", "head_tilt"],
-        home_deg={"head_tilt": 22.0, "arm_joint_1": 20.0, "arm_joint_2": 60.0,
+        home_deg={"head_tilt": 32.0, "arm_joint_1": 20.0, "arm_joint_2": 60.0,
                   "arm_joint_4": -60.0, "arm_joint_6": -30.0},
         # Apollo's head kinematics are approximate: the error grows with the angles.
         offset_gain_per_rad={

@@ -1,0 +1,192 @@
+"""The simulated depth camera: Drake's RgbdSensor (RenderEngineVtk) plus a LeafSystem that
+samples it at the camera rate, corrupts the image like a structured-light sensor and
+delivers it late.
+
+Per captured image ``k`` (capture time ``t_k = k / rate_hz``):
+
+* pixels where nothing was hit (too far) or closer than the near plane become NaN;
+* silhouettes: a pixel whose 4-neighbour depth differs by more than
+  ``silhouette_threshold_m`` (or whose neighbour is invalid) becomes NaN, on both
+  sides of the edge;
+* depth-dependent Gaussian noise ``sigma(z) = noise_sigma0_m + noise_k_per_m * z^2`` (m);
+* each pixel drops out (NaN) with probability ``dropout_probability``.
+
+All randomness of image ``k`` comes from a counter-based generator keyed by
+``(seed, CAMERA_STREAM, k)``, so the images do not depend on how often a Context was
+copied or reset. The image is delivered as a :class:`DepthFrame` at
+``t_k + delay_s`` carrying ``capture_time_s = t_k`` and ``sequence = k``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import (
+    ClippingRange,
+    DepthRange,
+    DepthRenderCamera,
+    MakeRenderEngineVtk,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+    SceneGraph,
+)
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.sensors import ImageDepth32F, RgbdSensor
+
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.frames import DepthFrame
+from drake_tracker.sim.encoders import counter_generator
+from drake_tracker.sim.scenario import CameraConfig
+
+#: Name of the renderer the simulated camera uses.
+RENDERER_NAME = "sim_vtk"
+#: Random stream of the camera (the encoders use stream 0).
+CAMERA_STREAM = 7
+
+
+def camera_intrinsics(config: CameraConfig) -> CameraIntrinsics:
+    """Full-resolution intrinsics of the simulated camera (square pixels, centred)."""
+    return CameraIntrinsics.from_fov(config.width, config.height, np.radians(config.fov_y_deg))
+
+
+def ensure_vtk_renderer(scene_graph: SceneGraph, name: str = RENDERER_NAME) -> str:
+    """Adds a headless RenderEngineVtk called ``name`` to ``scene_graph`` unless present."""
+    if not scene_graph.HasRenderer(name):
+        scene_graph.AddRenderer(name, MakeRenderEngineVtk(RenderEngineVtkParams()))
+    return name
+
+
+def depth_render_camera(config: CameraConfig, renderer_name: str = RENDERER_NAME
+                        ) -> DepthRenderCamera:
+    """Drake's depth camera for ``config``: clipping and depth range [near_m, far_m]."""
+    core = RenderCameraCore(renderer_name, camera_intrinsics(config).to_camera_info(),
+                            ClippingRange(config.near_m, config.far_m), RigidTransform())
+    return DepthRenderCamera(core, DepthRange(config.near_m, config.far_m))
+
+
+def invalidate_no_hits(depth_m: np.ndarray, near_m: float, far_m: float) -> np.ndarray:
+    """float32 copy with NaN where the renderer hit nothing (inf), or outside [near, far]."""
+    z = np.array(depth_m, dtype=np.float32, copy=True)
+    z[~np.isfinite(z) | (z < near_m) | (z > far_m)] = np.nan
+    return z
+
+
+def silhouette_mask(depth_m: np.ndarray, threshold_m: float) -> np.ndarray:
+    """True where a 4-neighbour's depth differs by more than ``threshold_m`` or is NaN
+    while the pixel is valid (both sides of a depth edge are marked)."""
+    z = np.asarray(depth_m)
+    mask = np.zeros(z.shape, bool)
+    with np.errstate(invalid="ignore"):
+        rows = ~(np.abs(z[1:, :] - z[:-1, :]) <= threshold_m)  # NaN counts as a jump
+        cols = ~(np.abs(z[:, 1:] - z[:, :-1]) <= threshold_m)
+    mask[1:, :] |= rows
+    mask[:-1, :] |= rows
+    mask[:, 1:] |= cols
+    mask[:, :-1] |= cols
+    return mask & np.isfinite(z)
+
+
+def corrupt_depth(clean_m: np.ndarray, config: CameraConfig, seed: int, index: int
+                  ) -> np.ndarray:
+    """The sensor model applied to a noise-free depth render (m); returns float32, NaN =
+    invalid. Depends only on (clean image, config, seed, index)."""
+    z = invalidate_no_hits(clean_m, config.near_m, config.far_m)
+    silhouettes = silhouette_mask(z, config.silhouette_threshold_m)
+    rng = counter_generator(seed, index, CAMERA_STREAM)
+    noise = rng.standard_normal(z.shape, dtype=np.float32)
+    dropout = rng.random(z.shape, dtype=np.float32) < config.dropout_probability
+    sigma = np.float32(config.noise_sigma0_m) + np.float32(config.noise_k_per_m) * z * z
+    noisy = z + sigma * noise
+    noisy[silhouettes | dropout] = np.nan
+    return noisy
+
+
+class DepthCameraSystem(LeafSystem):
+    """Samples a depth image at the camera rate and delivers it, corrupted, after a delay.
+
+    .. pydrake_system::
+
+        name: DepthCameraSystem
+        input_ports:
+        - depth_image_32f
+        output_ports:
+        - depth_frame
+
+    ``depth_image_32f`` is the noise-free render (``ImageDepth32F``, e.g. RgbdSensor's
+    ``depth_image_32f``); it is evaluated only at capture ticks ``k / rate_hz``.
+    ``depth_frame`` is the latest image that has *arrived* (``capture + delay_s``) as a
+    :class:`DepthFrame` (full resolution, float32 m, NaN = invalid), and
+    ``DepthFrame.empty()`` before the first arrival; it changes only at arrivals.
+
+    Abstract state: the frames in flight (captured, not yet arrived), oldest first, and
+    the latest arrived frame. One periodic unrestricted update handles both the capture
+    ticks (offset 0) and the arrival ticks (offset ``delay_s`` modulo the period).
+    """
+
+    def __init__(self, config: CameraConfig, seed: int = 0):
+        super().__init__()
+        self._config = config
+        self._seed = int(seed)
+        self._period = 1.0 / config.rate_hz
+        self._delay = float(config.delay_s)
+        self._intrinsics = camera_intrinsics(config)
+        self.DeclareAbstractInputPort("depth_image_32f", AbstractValue.Make(ImageDepth32F()))
+        self._pending = self.DeclareAbstractState(AbstractValue.Make(()))
+        self._latest = self.DeclareAbstractState(AbstractValue.Make(DepthFrame.empty()))
+        self.DeclareAbstractOutputPort(
+            "depth_frame", lambda: AbstractValue.Make(DepthFrame.empty()), self._calc_frame,
+            {self.abstract_state_ticket(self._latest)})
+        self.DeclarePeriodicUnrestrictedUpdateEvent(self._period, 0.0, self._on_tick)
+        arrival_offset = self._delay - np.floor(self._delay / self._period) * self._period
+        if arrival_offset > 1e-9 and self._period - arrival_offset > 1e-9:
+            self.DeclarePeriodicUnrestrictedUpdateEvent(self._period, arrival_offset,
+                                                        self._on_tick)
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        """Intrinsics of the delivered (full-resolution) images."""
+        return self._intrinsics
+
+    @property
+    def period_s(self) -> float:
+        return self._period
+
+    def _capture_index(self, t: float) -> int | None:
+        k = int(round(t / self._period))
+        return k if abs(t - k * self._period) < 1e-9 else None
+
+    def _on_tick(self, context, state):
+        t = context.get_time()
+        pending = list(context.get_abstract_state(self._pending).get_value())
+        latest = context.get_abstract_state(self._latest).get_value()
+        k = self._capture_index(t)
+        if k is not None:
+            image = self.get_input_port(0).Eval(context)
+            clean = np.asarray(image.data)[:, :, 0]
+            depth = corrupt_depth(clean, self._config, self._seed, k)
+            capture = k * self._period
+            pending.append(DepthFrame(capture, capture + self._delay, depth, k))
+        while pending and pending[0].arrival_time_s <= t + 1e-9:
+            latest = pending.pop(0)
+        state.get_mutable_abstract_state(self._pending).set_value(tuple(pending))
+        state.get_mutable_abstract_state(self._latest).set_value(latest)
+
+    def _calc_frame(self, context, output):
+        output.set_value(context.get_abstract_state(self._latest).get_value())
+
+
+def AddDepthCamera(builder: DiagramBuilder, scene_graph: SceneGraph, parent_frame_id,
+                   config: CameraConfig, seed: int = 0, name: str = "depth_camera"
+                   ) -> tuple[RgbdSensor, DepthCameraSystem]:
+    """Adds an RgbdSensor rigidly attached at the origin of the geometry frame
+    ``parent_frame_id`` (Drake camera axes: +z forward, +x right, +y down) and the
+    :class:`DepthCameraSystem` that samples, corrupts and delays its depth images."""
+    ensure_vtk_renderer(scene_graph)
+    sensor = builder.AddNamedSystem(
+        f"{name}_rgbd", RgbdSensor(parent_frame_id, RigidTransform(),
+                                   depth_render_camera(config)))
+    builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    camera = builder.AddNamedSystem(name, DepthCameraSystem(config, seed))
+    builder.Connect(sensor.depth_image_32F_output_port(), camera.get_input_port(0))
+    return sensor, camera

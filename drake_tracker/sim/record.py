@@ -1,0 +1,161 @@
+"""Simulate a scenario and record it as a :class:`~drake_tracker.recording.RecordedRun`.
+
+What is stored (see ``drake_tracker.recording`` for the ``.npz`` keys):
+
+* every encoder reading, at the full encoder rate, stamped with its sample time;
+* every depth image that arrived during the run, subsampled by ``image_stride``
+  (``core.camera.subsample``: pixels (i*stride, j*stride)) with the matching
+  intrinsics, and its capture and arrival times;
+* ground truth (joint angles, bias, camera offset, hand pose in the true camera frame)
+  at ``truth_rate_hz`` (default 100 Hz), sampled exactly at ``j / truth_rate_hz``.
+
+The simulator is advanced through the union of the reading and truth times; at each
+stop the world's output ports are read. (After ``AdvanceTo(t)`` the discrete updates at
+``t`` are still pending, so a reading stamped ``t`` is collected at the next stop, and
+the truth at ``t`` is the state at ``t``.)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+
+import numpy as np
+from pydrake.common.yaml import yaml_dump, yaml_dump_typed
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, OutputPort
+
+from drake_tracker.core.camera import subsample
+from drake_tracker.recording import RecordedRun
+from drake_tracker.sim.scenario import Scenario, load_scenario, validate_scenario
+from drake_tracker.sim.world import AddSimulatedWorld, SimulatedWorld
+
+#: Signature of the hook that adds systems beside the world; it returns extra output
+#: ports to sample at the truth times (stored in ``RecordedRun.extra[name]``).
+AddSystems = Callable[[DiagramBuilder, SimulatedWorld], "dict[str, OutputPort] | None"]
+
+
+def _as_array(value) -> np.ndarray:
+    if isinstance(value, RigidTransform):
+        return value.GetAsMatrix4()
+    return np.array(value, dtype=float, copy=True)
+
+
+def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
+                        image_stride: int = 8, truth_rate_hz: float = 100.0,
+                        add_systems: AddSystems | None = None,
+                        validate: bool = True) -> RecordedRun:
+    """Simulates ``scenario`` for ``duration_s`` (default: ``scenario.duration_s``) and
+    returns the recorded run. ``add_systems(builder, world)`` may add systems (e.g. a
+    tracker, a Meshcat visualizer) and return ports to sample at the truth times into
+    ``run.extra`` (RigidTransforms as 4x4). ``run.extra`` also holds
+    ``"wall_time_s"`` (simulation wall time, s)."""
+    if validate:
+        validate_scenario(scenario)
+    if image_stride < 1:
+        raise ValueError(f"image_stride must be >= 1, got {image_stride}")
+    if not truth_rate_hz > 0:
+        raise ValueError(f"truth_rate_hz must be > 0, got {truth_rate_hz}")
+    duration = float(scenario.duration_s if duration_s is None else duration_s)
+    if not duration > 0:
+        raise ValueError(f"duration_s must be > 0, got {duration}")
+
+    builder = DiagramBuilder()
+    world = AddSimulatedWorld(builder, scenario)
+    probes = (add_systems(builder, world) if add_systems else None) or {}
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    port_ctx = {}
+
+    def read(port: OutputPort):
+        system = port.get_system()
+        if system not in port_ctx:
+            port_ctx[system] = system.GetMyContextFromRoot(context)
+        return port.Eval(port_ctx[system])
+
+    h = world.encoder_period_s
+    reading_grid = np.arange(int(np.floor(duration / h + 1e-9)) + 1) * h
+    truth_grid = np.arange(int(np.floor(duration * truth_rate_hz + 1e-9)) + 1) / truth_rate_hz
+    stops = np.union1d(reading_grid, truth_grid)
+    stops = np.append(stops, duration + 0.5 * min(h, world.camera_period_s))
+    is_truth = np.isin(stops, truth_grid)
+    if len(stops) > 1 and np.max(np.diff(stops)) >= world.camera_period_s:
+        raise ValueError("the encoder and truth rates are below the camera rate; raise one")
+
+    reading_t, readings, biases = [], [], []
+    captures, arrivals, images = [], [], []
+    truth = {k: [] for k in ("t", "q", "offset", "X_CE")}
+    extra = {name: [] for name in probes}
+    last_stamp, last_seq = -np.inf, -1
+    start = time.perf_counter()
+    for t, sample_truth in zip(stops, is_truth):
+        simulator.AdvanceTo(float(t))
+        stamp = float(read(world.port("measurement_time"))[0])
+        if stamp > last_stamp and stamp >= 0 and stamp <= duration + 1e-9:
+            last_stamp = stamp
+            reading_t.append(stamp)
+            readings.append(np.array(read(world.port("measured_position")), copy=True))
+            biases.append(np.array(read(world.port("true_bias")), copy=True))
+        frame = read(world.port("depth_frame"))
+        if frame.sequence != last_seq and not frame.is_empty:
+            if frame.sequence != last_seq + 1:
+                raise RuntimeError(f"missed depth images {last_seq + 1}..{frame.sequence - 1}")
+            last_seq = frame.sequence
+            captures.append(frame.capture_time_s)
+            arrivals.append(frame.arrival_time_s)
+            images.append(np.array(subsample(frame.depth_m, image_stride), np.float32))
+        if sample_truth:
+            truth["t"].append(float(t))
+            truth["q"].append(_as_array(read(world.port("true_position"))))
+            truth["offset"].append(_as_array(read(world.port("true_camera_offset"))))
+            truth["X_CE"].append(_as_array(read(world.port("true_X_CE"))))
+            for name, port in probes.items():
+                extra[name].append(_as_array(read(port)))
+    wall = time.perf_counter() - start
+
+    # The true bias at a truth time is that of the latest sample at or before it (the
+    # encoder port still shows the previous sample while the update at t is pending).
+    reading_times = np.array(reading_t, float)
+    truth_times = np.array(truth["t"], float)
+    latest = np.clip(np.searchsorted(reading_times, truth_times + 1e-9, side="right") - 1,
+                     0, None)
+    truth_bias = np.array(biases, float).reshape(-1, len(world.robot_joint_names))[latest]
+    intrinsics = world.intrinsics.subsampled(image_stride)
+    n = len(world.robot_joint_names)
+    run = RecordedRun(
+        robot_config_yaml=yaml_dump(dataclasses.asdict(world.robot_config)),
+        joint_names=list(world.robot_joint_names),
+        reading_times_s=reading_times,
+        readings_rad=np.array(readings, float).reshape(-1, n),
+        image_capture_times_s=np.array(captures, float),
+        image_arrival_times_s=np.array(arrivals, float),
+        depth_images_m=np.array(images, np.float32).reshape(-1, intrinsics.height,
+                                                             intrinsics.width),
+        camera_intrinsics=intrinsics,
+        truth_times_s=truth_times,
+        truth_positions_rad=np.array(truth["q"], float).reshape(-1, n),
+        truth_bias_rad=truth_bias,
+        truth_camera_offset=np.array(truth["offset"], float).reshape(-1, 6),
+        truth_X_CE=np.array(truth["X_CE"], float).reshape(-1, 4, 4),
+        scenario_yaml=yaml_dump_typed(scenario),
+    )
+    run.extra.update({name: np.array(v) for name, v in extra.items()})
+    run.extra["wall_time_s"] = wall
+    return run
+
+
+def run_record(args) -> int:
+    """``drake-tracker record --scenario NAME --out FILE [--duration S] [--image-stride N]``:
+    simulates and writes the run as ``.npz`` (format in ``drake_tracker.recording``)."""
+    scenario = load_scenario(args.scenario)
+    run = simulate_and_record(scenario, duration_s=args.duration,
+                              image_stride=args.image_stride, validate=False)
+    path = run.save(args.out)
+    print(f"recorded '{scenario.name}': {len(run.reading_times_s)} readings, "
+          f"{len(run.image_capture_times_s)} images "
+          f"({run.camera_intrinsics.width}x{run.camera_intrinsics.height}), "
+          f"{len(run.truth_times_s)} truth samples, {run.extra['wall_time_s']:.1f} s -> {path}")
+    return 0
