@@ -115,3 +115,23 @@ def test_fused_render_likelihood_equals_render_then_likelihood(model, configurat
     with pytest.raises(ValueError, match="shape"):
         wrong = prepare_observation(np.ones((7, 9), np.float32), LikelihoodParams())
         renderer.log_likelihoods(q, wrong, LikelihoodParams())
+
+
+def test_culling_does_not_change_the_images(model):
+    """Back-face and frustum culling are exact: the same images with culling disabled
+    (no triangle marked closed, bounding spheres that never leave the frustum), for
+    configurations spread widely enough to put parts out of view and near the camera."""
+    from dataclasses import replace
+
+    from drake_tracker.core.render_batched import _render_tables
+
+    intrinsics = FULL.subsampled(8)
+    culled = BatchedDepthRenderer(model, intrinsics)
+    plain = BatchedDepthRenderer(model, intrinsics)
+    tables = list(_render_tables(replace(plain.meshes, triangle_closed=None),
+                                 plain.kinematics.num_bodies))
+    tables[5] = np.full_like(tables[5], 1e6)  # bounding-sphere radii
+    plain._tables = tuple(tables)
+    q = random_configurations(model, 200, seed=11, spread_rad=1.0,
+                              center=default_view_configuration(model))
+    np.testing.assert_array_equal(culled.render(q), plain.render(q))
