@@ -4,6 +4,14 @@ All particles are rendered in one call by a numba z-buffer rasteriser that runs 
 parallel over particles. The triangles come from :mod:`drake_tracker.core.geometry`,
 the camera-relative body poses from :class:`~drake_tracker.core.kinematics.BatchedKinematics`.
 
+Per particle, a body whose bounding sphere is outside the view frustum is skipped, each
+visible vertex is transformed and projected once, triangles of closed surfaces that face
+away from the camera are skipped (exact: the images are the same without it), and each
+triangle is scanned row by row over exactly the columns it covers. For the tracker's
+image update, :meth:`BatchedDepthRenderer.log_likelihoods` fuses this with the pixel
+likelihood (:mod:`drake_tracker.core.render_likelihood`), so no (N, H, W) images are
+written to memory.
+
 Conventions match what Drake's RenderEngineVtk actually renders (measured with drake
 1.51.1): the centre of pixel (i, j) is the ray through u = i + 0.5, v = j + 0.5 of the
 projection u = fx*x/z + cx, v = fy*y/z + cy (OpenGL's pixel-centre convention), i.e. half
