@@ -10,9 +10,10 @@ What is stored (see ``drake_tracker.recording`` for the ``.npz`` keys):
   at ``truth_rate_hz`` (default 100 Hz), sampled exactly at ``j / truth_rate_hz``.
 
 The simulator is advanced through the union of the reading and truth times; at each
-stop the world's output ports are read. (After ``AdvanceTo(t)`` the discrete updates at
+stop the world's output ports are read. (After ``AdvanceTo(t)``, t > 0, the discrete updates at
 ``t`` are still pending, so a reading stamped ``t`` is collected at the next stop, and
-the truth at ``t`` is the state at ``t``.)
+the truth at ``t`` is the state at ``t``; the truth at 0 is read before the first
+``AdvanceTo``, which performs the updates at 0.)
 """
 
 from __future__ import annotations
@@ -68,6 +69,7 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     diagram = builder.Build()
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
+    world.set_initial_state(context)
     port_ctx = {}
 
     def read(port: OutputPort):
@@ -91,7 +93,19 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     extra = {name: [] for name in probes}
     last_stamp, last_seq = -np.inf, -1
     start = time.perf_counter()
+    def sample_truth_now(t: float) -> None:
+        truth["t"].append(t)
+        truth["q"].append(_as_array(read(world.port("true_position"))))
+        truth["offset"].append(_as_array(read(world.port("true_camera_offset"))))
+        truth["X_CE"].append(_as_array(read(world.port("true_X_CE"))))
+        for name, port in probes.items():
+            extra[name].append(_as_array(read(port)))
+
     for t, sample_truth in zip(stops, is_truth):
+        # The first AdvanceTo(0) also performs the discrete updates at 0 (a dynamic
+        # plant steps to time_step_s), so the state at 0 is read before it.
+        if sample_truth and t == 0.0:
+            sample_truth_now(0.0)
         simulator.AdvanceTo(float(t))
         stamp = float(read(world.port("measurement_time"))[0])
         if stamp > last_stamp and stamp >= 0 and stamp <= duration + 1e-9:
@@ -107,13 +121,8 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
             captures.append(frame.capture_time_s)
             arrivals.append(frame.arrival_time_s)
             images.append(np.array(subsample(frame.depth_m, image_stride), np.float32))
-        if sample_truth:
-            truth["t"].append(float(t))
-            truth["q"].append(_as_array(read(world.port("true_position"))))
-            truth["offset"].append(_as_array(read(world.port("true_camera_offset"))))
-            truth["X_CE"].append(_as_array(read(world.port("true_X_CE"))))
-            for name, port in probes.items():
-                extra[name].append(_as_array(read(port)))
+        if sample_truth and t > 0.0:
+            sample_truth_now(float(t))
     wall = time.perf_counter() - start
 
     # The true bias at a truth time is that of the latest sample at or before it (the

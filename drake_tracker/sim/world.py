@@ -162,6 +162,10 @@ class ReferenceMotion:
         w = float(smooth_window(np.array([t]), o.start_s, hold, OCCLUDER_RAMP_S)[0])
         return w * active + (1.0 - w) * parked
 
+    def velocities(self, t: float, h: float = 1e-4) -> np.ndarray:
+        """(nv,) central differences of ``positions`` (every joint is single-DoF)."""
+        return (self.positions(t + h) - self.positions(t - h)) / (2 * h)
+
     def positions(self, t: float) -> np.ndarray:
         """(nq,) plant positions at time ``t`` (s)."""
         q = np.zeros(self.num_positions)
@@ -235,6 +239,10 @@ class InverseDynamicsTracking(LeafSystem):
         q, v = x[:self._nq], x[self._nq:]
         vdot = a_ref + self._kp * (q_0 - q) + self._kd * (v_ref - v)
         self._plant.SetPositionsAndVelocities(self._context, x)
+        # CalcInverseDynamics takes the applied forces as given: add gravity (the force
+        # elements) so that it is compensated.
+        self._forces.SetZero()
+        self._plant.CalcForceElementsContribution(self._context, self._forces)
         tau = self._plant.CalcInverseDynamics(self._context, vdot, self._forces)
         output.SetFromVector(tau)
 
@@ -316,6 +324,16 @@ class SimulatedWorld:
     camera: DepthCameraSystem
     truth: TruthSystem
     ports: dict[str, OutputPort] = field(default_factory=dict)
+    #: True when ``plant`` is a simulated (discrete) subsystem of the Diagram.
+    dynamic: bool = False
+
+    def set_initial_state(self, root_context, time_s: float = 0.0) -> None:
+        """Dynamic mode: puts the plant on the reference (positions and velocities at
+        ``time_s``) in the Diagram's ``root_context``; kinematic mode: nothing to do."""
+        if self.dynamic:
+            plant_context = self.plant.GetMyMutableContextFromRoot(root_context)
+            self.plant.SetPositions(plant_context, self.reference.positions(time_s))
+            self.plant.SetVelocities(plant_context, self.reference.velocities(time_s))
 
     def port(self, name: str) -> OutputPort:
         """The output port ``name`` (one of ``WORLD_PORTS``)."""
@@ -377,6 +395,7 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
                                 ee_frame)
 
     if dynamic:
+        plant.SetDefaultPositions(reference.positions(0.0))
         controller = builder.AddNamedSystem(f"{name}_controller",
                                             InverseDynamicsTracking(plant, reference))
         builder.Connect(plant.get_state_output_port(), controller.get_input_port(0))
@@ -425,7 +444,7 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
         model=model, robot_joint_names=robot_names, plant_joint_names=joint_names(plant),
         camera_frame=camera_frame, end_effector_frame=ee_frame,
         intrinsics=camera.intrinsics, trajectory=trajectory, reference=reference,
-        encoders=encoders, camera=camera, truth=truth, ports=ports)
+        encoders=encoders, camera=camera, truth=truth, ports=ports, dynamic=dynamic)
 
 
 def build_simulated_world(scenario: Scenario) -> tuple[Diagram, SimulatedWorld]:
