@@ -77,7 +77,7 @@ class TrajectoryConfig:
     excursion_start_s: float = 15.0
     excursion_duration_s: float = 25.0
     excursion_ramp_s: float = 4.0
-    #: Knots per second of the cubic spline played back (s^-1).
+    #: Samples per second at which the world checks the joint limits (s^-1).
     sample_rate_hz: float = 200.0
 
 

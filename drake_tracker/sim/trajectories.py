@@ -12,8 +12,8 @@ joints, in radians (metres for prismatic joints), built from a ``TrajectoryConfi
   that takes the hand out of the camera view and back;
 * ``static``: the home pose.
 
-The world plays a cubic Hermite spline through samples of these functions
-(``sample_rate_hz`` knots per second), so the played motion is C1 and exact at knots.
+The world evaluates ``positions(t)`` exactly at every time it needs (no spline); it
+checks the joint limits on samples ``sample_rate_hz`` per second over the run.
 """
 
 from __future__ import annotations
