@@ -17,14 +17,6 @@ import numpy as np
 DEFAULT_SEGMENTS = 14
 
 
-def sphere_segments(segments: int) -> int:
-    """Segments used for Sphere shapes: fewer than for cylinders and capsules (a sphere
-    tessellated with n segments has about n² triangles, a cylinder 4n). With
-    the defaults (10 for 14) the renderer still matches Drake's RenderEngineVtk to well
-    within the tests' tolerances, at about 20% less rendering time for Apollo."""
-    return max(6, (5 * segments) // 7)
-
-
 @dataclass
 class RobotMeshes:
     """Triangles of all visual geometries, each vertex in the frame of its body.
@@ -200,7 +192,7 @@ def tessellate_shape(shape, segments: int = DEFAULT_SEGMENTS) -> tuple[np.ndarra
     if isinstance(shape, Box):
         return box_mesh([shape.width(), shape.depth(), shape.height()])
     if isinstance(shape, Sphere):
-        return sphere_mesh(shape.radius(), sphere_segments(segments))
+        return sphere_mesh(shape.radius(), segments)
     if isinstance(shape, Cylinder):
         return cylinder_mesh(shape.radius(), shape.length(), segments)
     if isinstance(shape, Capsule):
