@@ -7,8 +7,9 @@ repetitions after a warm-up (numba compilation excluded).
 Keys of ``bench.json``:
 
 * ``image_updates_per_s_2000``: full CPF image updates per second at 2000 likelihood
-  evaluations per image (particles x blocks, as dbrt counts ``sample_count``), 80x60,
-  Apollo's 7 arm + 2 head joints + 6 virtual joints (15 blocks);
+  evaluations per image (particles x blocks, as dbrt counts ``sample_count``, times the
+  annealing layers), 80x60, Apollo's 7 arm + 2 head joints + 6 virtual joints (15
+  blocks);
 * ``image_updates_per_s_default``: the same with the default parameters;
 * ``stage_ms_2000``: per image update at 2000 evaluations: ``fk``, ``render`` and
   ``likelihood`` measured as separate passes, ``fused`` (what the filter runs: the three
@@ -61,7 +62,8 @@ def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,
     """Times whole CPF image updates with ``num_particles`` per block."""
     blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
     update = CpfImageUpdate(model, camera, blocks, num_particles, params.image.likelihood,
-                            params.image.image_width_px, params.image.max_kl)
+                            params.image.image_width_px, params.image.max_kl,
+                            annealing_betas=tuple(params.image.annealing_betas))
     observation = update.prepare(_test_image(model, camera))
     std = np.full(model.num_joints, np.radians(1.0))
     std[model.virtual_joint_indices] = 0.005
@@ -94,7 +96,7 @@ def bench_stages(update: CpfImageUpdate, observation, repeats: int) -> dict:
         lambda: update.log_likelihood(q, observation), repeats)
     weights = normalized_weights(rng.normal(0, 5, update.num_particles))
     per_block = _median_time(lambda: systematic_resample(weights, rng), 20 * repeats)
-    out["resampling"] = 1e3 * per_block * len(update.blocks)
+    out["resampling"] = 1e3 * per_block * len(update.blocks) * len(update.annealing_betas)
     return out
 
 
@@ -132,7 +134,8 @@ def run_benchmarks(quick: bool = False) -> dict:
     params = TrackerParams()
     repeats = 3 if quick else 7
     num_blocks = len(resolve_blocks(params, model.joint_names, camera_chain_joints(model)))
-    particles_2000 = int(np.ceil(2000 / num_blocks))
+    layers = len(params.image.annealing_betas)
+    particles_2000 = int(np.ceil(2000 / (num_blocks * layers)))
     at_2000 = bench_image_update(model, camera, params, particles_2000, repeats)
     default = bench_image_update(model, camera, params, params.image.num_particles, repeats)
     stages = bench_stages(at_2000["update"], at_2000["observation"], repeats)
@@ -148,6 +151,7 @@ def run_benchmarks(quick: bool = False) -> dict:
         "image_size": [small.width, small.height],
         "num_joints": model.num_joints,
         "num_blocks": num_blocks,
+        "annealing_layers": layers,
         "image_updates_per_s_2000": at_2000["updates_per_s"],
         "evaluations_2000": at_2000["evaluations"],
         "image_updates_per_s_default": default["updates_per_s"],

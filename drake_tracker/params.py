@@ -84,7 +84,7 @@ class ImageParams:
     #: False: images are ignored (the encoders-only method).
     enabled: bool = True
     #: Particles per block; likelihood evaluations per image = particles x blocks.
-    num_particles: int = 150
+    num_particles: int = 50
     #: ``per-joint`` (one block per joint, base to tip, then the camera offset),
     #: ``arm-camera`` (robot joints, then the 6 virtual joints), ``single``, ``camera``
     #: (only the virtual joints, one block each), or an
@@ -93,6 +93,9 @@ class ImageParams:
     block_joints: list[list[str]] = field(default_factory=list)
     #: Resample when KL(weights || uniform) exceeds this (nats).
     max_kl: float = 2.0
+    #: Likelihood exponents of successive CPF sweeps per image, increasing to 1; [1.0]
+    #: is the paper's single sweep. Evaluations per image = particles x blocks x layers.
+    annealing_betas: list[float] = field(default_factory=lambda: [0.003, 0.03, 0.3, 1.0])
     #: Images are subsampled to about this width (px) before the update (SPEC §4).
     image_width_px: int = 80
     #: Subtracted from each image's capture stamp to get its time t' (s).
@@ -183,6 +186,10 @@ def validate_tracker_params(params: TrackerParams) -> None:
         _check(len(im.block_joints) > 0, "image.block_joints", im.block_joints,
                "must list at least one block when image.blocks is 'explicit'")
     _check(im.max_kl > 0, "image.max_kl", im.max_kl, "must be > 0")
+    betas = list(im.annealing_betas)
+    _check(bool(betas) and betas[-1] == 1.0 and all(0 < b <= 1 for b in betas)
+           and betas == sorted(betas), "image.annealing_betas", betas,
+           "must increase within (0, 1] and end at 1.0")
     _check(im.image_width_px >= 1, "image.image_width_px", im.image_width_px, "must be >= 1")
     _check(math.isfinite(im.image_time_offset_s), "image.image_time_offset_s",
            im.image_time_offset_s, "must be finite")

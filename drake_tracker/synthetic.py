@@ -24,11 +24,12 @@ def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0
                   camera_offset: np.ndarray | None = None, amplitude_rad: float = 0.1,
                   period_s: float = 4.0, depth_noise_m: float = 0.002,
                   background_m: float = 2.5, renderer: str = "batched",
-                  seed: int = 0) -> RecordedRun:
+                  biased_joints: list[str] | None = None, seed: int = 0) -> RecordedRun:
     """A RecordedRun of the robot moving sinusoidally around its default view pose.
 
-    Every robot joint gets ``bias_rad`` of encoder bias; ``camera_offset`` (6) is the
-    true camera pose relative to the nominal one (default: 1 cm, 1 deg on each axis).
+    Every robot joint (or those in ``biased_joints``) gets ``bias_rad`` of encoder bias;
+    ``camera_offset`` (6) is the true camera pose relative to the nominal one (default:
+    1 cm, 1 deg on each axis).
     """
     rng = np.random.default_rng(seed)
     camera = camera or CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
@@ -46,7 +47,9 @@ def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0
 
     reading_times = np.arange(0.0, duration_s, 1.0 / encoder_rate_hz)
     q_read = truth(reading_times)[:, robot]
-    readings = q_read + bias_rad + rng.normal(0.0, 1e-4, q_read.shape)
+    names = list(model.robot_joint_names)
+    biased = np.array([n in (biased_joints or names) for n in names], float)
+    readings = q_read + bias_rad * biased + rng.normal(0.0, 1e-4, q_read.shape)
     capture = np.arange(0.0, duration_s - delay_s, 1.0 / image_rate_hz)
     images = make_renderer(model, camera, renderer).render(truth(capture))
     images = np.where(np.isfinite(images), images, background_m)
@@ -67,7 +70,7 @@ def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0
         camera_intrinsics=camera,
         truth_times_s=truth_times,
         truth_positions_rad=q_truth[:, robot],
-        truth_bias_rad=np.full((len(truth_times), len(robot)), bias_rad),
+        truth_bias_rad=np.tile(bias_rad * biased, (len(truth_times), 1)),
         truth_camera_offset=np.tile(offset, (len(truth_times), 1)),
         truth_X_CE=X_CE,
     )

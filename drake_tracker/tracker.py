@@ -95,7 +95,8 @@ class ImageProcessor:
         blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
         self.update = CpfImageUpdate(
             model, camera, blocks, im.num_particles,
-            im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m)
+            im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
+            tuple(im.annealing_betas))
 
     def image_time(self, frame: DepthFrame) -> float:
         return float(frame.capture_time_s) - self.params.image.image_time_offset_s

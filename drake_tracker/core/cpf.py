@@ -118,3 +118,56 @@ def coordinate_particle_filter(
         log_likelihood_spread=float(previous.max() - previous.min()),
         block_log_likelihood_max=block_max,
     )
+
+
+def annealed_coordinate_particle_filter(
+    prior_mean: np.ndarray,
+    prior_std: np.ndarray,
+    blocks: Sequence[np.ndarray],
+    num_particles: int,
+    log_likelihood: Callable[[np.ndarray], np.ndarray],
+    rng: np.random.Generator,
+    max_kl: float = 2.0,
+    betas: Sequence[float] = (1.0,),
+    keep_std_fraction: float = 0.5,
+) -> CPFResult:
+    """CPF sweeps over the likelihood raised to ``betas`` (increasing, ending at 1).
+
+    ``betas == (1,)`` is the paper's single sweep. With more layers, each sweep but the
+    last is a search: the next sweep starts at its moment-matched mean, with each
+    coordinate's std the larger of its matched std and ``keep_std_fraction`` times the
+    previous sweep's. The result is the last sweep's (diagnostics summed over sweeps).
+
+    Why: the pixel likelihood is so peaked that one sweep, sampling block after block
+    while the later blocks sit at a prior mean several degrees off, lets the early
+    blocks absorb the later blocks' error; tempered sweeps first (annealed particle
+    filtering) find the basin. Measured on Apollo with 8.6 deg of bias on every arm
+    joint: a single sweep diverges, four layers converge to a few millimetres.
+    """
+    betas = [float(b) for b in betas]
+    if not betas or betas[-1] != 1.0 or any(not 0 < b <= 1 for b in betas) or any(
+            b1 > b2 for b1, b2 in zip(betas, betas[1:])):
+        raise ValueError(f"annealing betas must increase within (0, 1] and end at 1, "
+                         f"got {betas}")
+    if not 0 < keep_std_fraction <= 1:
+        raise ValueError(f"keep_std_fraction must be in (0, 1], got {keep_std_fraction}")
+    mean = np.asarray(prior_mean, float)
+    std = np.asarray(prior_std, float)
+    resamples = evaluations = 0
+    result = None
+    for layer, beta in enumerate(betas):
+        if beta == 1.0:
+            scored = log_likelihood
+        else:
+            def scored(q, beta=beta):
+                return beta * np.asarray(log_likelihood(q), float)
+        result = coordinate_particle_filter(mean, std, blocks, num_particles, scored, rng,
+                                            max_kl)
+        resamples += result.num_resamples
+        evaluations += result.num_evaluations
+        if layer < len(betas) - 1:
+            mean = result.mean
+            std = np.maximum(np.sqrt(result.variance), keep_std_fraction * std)
+    result.num_resamples = resamples
+    result.num_evaluations = evaluations
+    return result

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drake_tracker.core.camera import CameraIntrinsics, stride_for_width, subsample
-from drake_tracker.core.cpf import CPFResult, coordinate_particle_filter
+from drake_tracker.core.cpf import CPFResult, annealed_coordinate_particle_filter
 from drake_tracker.core.kalman import MEAN_A, VAR_A
 from drake_tracker.core.likelihood import (
     LikelihoodParams,
@@ -64,12 +64,15 @@ class CpfImageUpdate:
         image_width_px: images are subsampled to about this width.
         max_kl: resampling threshold (nats).
         renderer: ``batched`` or ``drake``.
+        annealing_betas: likelihood exponents of successive CPF sweeps, ending at 1
+            (``(1,)``: the paper's single sweep); see
+            :func:`~drake_tracker.core.cpf.annealed_coordinate_particle_filter`.
     """
 
     def __init__(self, model, camera: CameraIntrinsics, blocks: list[np.ndarray],
                  num_particles: int, likelihood: LikelihoodParams, image_width_px: int = 80,
                  max_kl: float = 2.0, renderer: str = "batched", near_m: float = 0.1,
-                 far_m: float = 6.0):
+                 far_m: float = 6.0, annealing_betas: tuple[float, ...] = (1.0,)):
         likelihood.validate()
         if num_particles < 1:
             raise ValueError(f"num_particles must be >= 1, got {num_particles}")
@@ -85,12 +88,13 @@ class CpfImageUpdate:
         self.num_particles = int(num_particles)
         self.likelihood = likelihood
         self.max_kl = float(max_kl)
+        self.annealing_betas = tuple(float(b) for b in annealing_betas)
         self.renderer = make_renderer(model, self.intrinsics, renderer, near_m, far_m)
         self.times = StageTimes()
 
     @property
     def evaluations_per_image(self) -> int:
-        return self.num_particles * len(self.blocks)
+        return self.num_particles * len(self.blocks) * len(self.annealing_betas)
 
     def prepare(self, depth: np.ndarray) -> PreparedObservation:
         """Checks a full-resolution depth image, subsamples it and precomputes its pixels."""
@@ -120,10 +124,10 @@ class CpfImageUpdate:
             return None
         t0 = time.perf_counter()
         eval_before = self.times.render_s + self.times.likelihood_s
-        result = coordinate_particle_filter(
+        result = annealed_coordinate_particle_filter(
             prior[MEAN_A], np.sqrt(np.maximum(prior[VAR_A], 0.0)), self.blocks,
             self.num_particles, lambda q: self.log_likelihood(q, observation), rng,
-            self.max_kl)
+            self.max_kl, self.annealing_betas)
         total = time.perf_counter() - t0
         self.times.filter_s += total - (self.times.render_s + self.times.likelihood_s
                                         - eval_before)
