@@ -16,6 +16,7 @@ def _add_demo(sub) -> None:
     p.add_argument("--out", default="out/demo", help="output folder (default: %(default)s)")
     p.add_argument("--duration", type=float, default=None,
                    help="override the scenario duration (s)")
+    p.add_argument("--params", default=None, help="tracker parameters YAML file")
 
     def run(args):
         from drake_tracker.demo import run_demo

@@ -105,17 +105,24 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None
     )
 
 
+def readings_at(run: RecordedRun, times_s: np.ndarray) -> np.ndarray:
+    """(T, n) the latest reading stamped at or before each time (NaN before the first)."""
+    k = np.searchsorted(run.reading_times_s, np.asarray(times_s) + 1e-9, side="right") - 1
+    out = np.full((len(k), len(run.joint_names)), np.nan)
+    out[k >= 0] = run.readings_rad[k[k >= 0]]
+    return out
+
+
 def encoders_only_X_CE(run: RecordedRun, model=None) -> np.ndarray:
     """The baseline: forward kinematics of the latest raw reading at each truth time,
     with the nominal camera (virtual joints at 0). (T, 4, 4); NaN before any reading."""
     model = model if model is not None else model_for_run(run)
-    readout = PoseReadout(model)
-    k = np.searchsorted(run.reading_times_s, run.truth_times_s, side="right") - 1
-    out = np.full((len(k), 4, 4), np.nan)
-    ok = k >= 0
-    q = np.array([full_reading(model, run.readings_rad[i]) for i in k[ok]])
-    if len(q):
-        out[ok] = readout.poses(q)[0]
+    readings = readings_at(run, run.truth_times_s)
+    out = np.full((len(readings), 4, 4), np.nan)
+    ok = np.all(np.isfinite(readings), axis=1)
+    if ok.any():
+        q = np.array([full_reading(model, r) for r in readings[ok]])
+        out[ok] = PoseReadout(model).poses(q)[0]
     return out
 
 

@@ -39,10 +39,11 @@ class JointNoise:
     #: σa: angle random-walk growth (rad/√s). Large: the angle follows the encoder.
     angle_process_std_rad_per_sqrt_s: float = 10.0
     #: σb: bias random-walk growth (rad/√s). It sets how far each image may move the
-    #: angle (about σb/√30 ≈ 0.5 deg at 30 images/s): measured, a wide per-image search
-    #: (0.1-0.2) lets the coordinate-wise sampler trade one joint's error for another's
-    #: and drift, and a narrow one (0.02) converges slowly from a large bias.
-    bias_process_std_rad_per_sqrt_s: float = 0.05
+    #: angle (σb·√0.1 ≈ 0.2 deg at 10 images/s). Measured on s-full-arm: with 0.05 the
+    #: coordinate-wise sampler trades one joint's error for another's and drifts
+    #: (110 mm even with exact encoders); 0.01 stays at 1 mm and, with the annealed
+    #: sweeps, converges from an 8.6 deg bias.
+    bias_process_std_rad_per_sqrt_s: float = 0.01
     #: c: fraction of the bias that remains after one second, in (0, 1].
     bias_decay_per_s: float = 0.9
     #: False: the joint is trusted (its bias is held at 0).
@@ -101,7 +102,8 @@ class ImageParams:
     #: Subtracted from each image's capture stamp to get its time t' (s).
     image_time_offset_s: float = 0.0
     #: Images closer than this to the previously processed one are skipped (s); 0 = all.
-    min_image_interval_s: float = 0.0
+    #: 0.1 processes about 10 of a 30 Hz camera's images per second.
+    min_image_interval_s: float = 0.1
     #: ``batched`` (numba rasteriser) or ``drake`` (RenderEngineVtk, the reference).
     renderer: str = "batched"
     near_m: float = 0.1

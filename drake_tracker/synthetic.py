@@ -56,7 +56,7 @@ def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0
     images = images + rng.normal(0.0, depth_noise_m, images.shape)
     truth_times = reading_times[::max(1, int(round(encoder_rate_hz / 100.0)))]
     q_truth = truth(truth_times)
-    X_CE, _ = PoseReadout(model).poses(q_truth)
+    X_CE = PoseReadout(model).poses(q_truth)[0]
     return RecordedRun(
         robot_config_yaml=yaml_dump({"model_file": model.config.model_file,
                                      "camera_frame": model.config.camera_frame,

@@ -74,12 +74,13 @@ class PoseReadout:
         self.model = model
         self.kinematics = BatchedKinematics.from_plant(model.plant)
 
-    def poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(X_CE, X_WE, X_WC), each (N, 4, 4), for configurations q (N, n) or (n,)."""
         q = np.atleast_2d(q)
         X_WC = self.kinematics.frame_poses(q, self.model.camera_frame)
         X_WE = self.kinematics.frame_poses(q, self.model.end_effector_frame)
         X_CE = np.linalg.inv(X_WC) @ X_WE
-        return X_CE, X_WE
+        return X_CE, X_WE, X_WC
 
 
 class ImageProcessor:
@@ -173,7 +174,7 @@ def full_reading(model, robot_reading: np.ndarray) -> np.ndarray:
 
 def estimate_from_belief(model, readout: PoseReadout, time_s: float,
                          belief: np.ndarray) -> TrackerEstimate:
-    X_CE, X_WE = readout.poses(belief[MEAN_A])
+    X_CE, X_WE, _ = readout.poses(belief[MEAN_A])
     return TrackerEstimate(
         time_s=float(time_s),
         joint_names=list(model.joint_names),

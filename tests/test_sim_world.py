@@ -9,8 +9,8 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_tracker.demo import encoders_only, readings_at
 from drake_tracker.metrics import pose_errors
+from drake_tracker.offline import encoders_only_X_CE, readings_at
 from drake_tracker.robot import add_robot, camera_offset_transform
 from drake_tracker.sim.depth_camera import depth_render_camera, ensure_vtk_renderer
 from drake_tracker.sim.record import simulate_and_record
@@ -204,12 +204,12 @@ def test_second_robot_simulates_and_encoders_only_is_exact_without_errors():
                                "wrist_2", "wrist_3"]
     assert len(run.image_capture_times_s) == 14
     assert np.isfinite(run.depth_images_m[-1]).mean() > 0.5
-    t_err, r_err = pose_errors(encoders_only(run), run.truth_X_CE)
+    t_err, r_err = pose_errors(encoders_only_X_CE(run), run.truth_X_CE)
     assert t_err.max() < 1e-6 and r_err.max() < 1e-4
     # With a bias the baseline is off.
     s.encoders.bias = "constant"
     biased = simulate_and_record(s, duration_s=0.1, image_stride=8)
-    assert pose_errors(encoders_only(biased), biased.truth_X_CE)[0].min() > 50.0
+    assert pose_errors(encoders_only_X_CE(biased), biased.truth_X_CE)[0].min() > 50.0
 
 
 def test_dynamic_mode_tracks_the_trajectory():

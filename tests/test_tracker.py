@@ -39,6 +39,7 @@ def small_params(seed: int = 0) -> TrackerParams:
     params = TrackerParams()
     params.image.num_particles = 100
     params.image.seed = seed
+    params.image.min_image_interval_s = 0.0
     return params
 
 
@@ -166,17 +167,20 @@ def test_cpf_moves_each_joint_toward_the_truth_on_a_drake_rendered_image(apollo)
     assert np.median(errors) < 0.5, errors
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_fusion_beats_encoders_only_on_a_synthetic_run(apollo, seed):
-    """3 deg of bias on every joint and a 1 cm / 1 deg camera offset; 2 s of data."""
-    run = synthetic_run(apollo, duration_s=2.0, bias_rad=np.radians(3.0), seed=seed)
-    result = replay_run(run, small_params(seed), apollo)
-    report = run_report(run, {"encoders_only": encoders_only_X_CE(run, apollo),
-                              "full_fusion": result.X_CE})
-    encoders = report["methods"]["encoders_only"]["translation_mm"]["p50"]
-    fusion = report["methods"]["full_fusion"]["translation_mm"]["p50"]
-    assert fusion < encoders / 3.0, (fusion, encoders)
-    assert np.all(np.isfinite(result.positions[np.isfinite(result.positions[:, 0])]))
+def test_fusion_beats_encoders_only_on_synthetic_runs_over_seeds(apollo):
+    """3 deg of bias on every joint and a 1 cm / 1 deg camera offset; 2 s of data, three
+    seeds (data and filter): the median over seeds of the median error."""
+    ratios = []
+    for seed in range(3):
+        run = synthetic_run(apollo, duration_s=2.0, bias_rad=np.radians(3.0), seed=seed)
+        result = replay_run(run, small_params(seed), apollo)
+        report = run_report(run, {"encoders_only": encoders_only_X_CE(run, apollo),
+                                  "full_fusion": result.X_CE})
+        encoders = report["methods"]["encoders_only"]["translation_mm"]["p50"]
+        fusion = report["methods"]["full_fusion"]["translation_mm"]["p50"]
+        ratios.append(encoders / fusion)
+        assert np.all(np.isfinite(result.positions[np.isfinite(result.positions[:, 0])]))
+    assert np.median(ratios) > 5.0, ratios
 
 
 def test_second_robot_tracks(arm6):

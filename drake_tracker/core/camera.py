@@ -9,9 +9,10 @@ import numpy as np
 
 @dataclass(frozen=True)
 class CameraIntrinsics:
-    """Pinhole intrinsics in Drake's convention: pixel (u, v) has its centre at integer
-    coordinates, and a point (x, y, z) in the camera frame (+z forward, +x right,
-    +y down) projects to ``u = fx*x/z + cx``, ``v = fy*y/z + cy``.
+    """Pinhole intrinsics as Drake's CameraInfo: a point (x, y, z) in the camera frame
+    (+z forward, +x right, +y down) projects to ``u = fx*x/z + cx``, ``v = fy*y/z + cy``,
+    and pixel (i, j) looks along the ray through ``u = i + 0.5``, ``v = j + 0.5``, which
+    is what RenderEngineVtk renders (measured with drake 1.51.1).
 
     Widths and heights are in pixels; focal lengths and centres in pixels too.
     """
@@ -50,16 +51,22 @@ class CameraIntrinsics:
         return CameraInfo(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
 
     def subsampled(self, stride: int) -> CameraIntrinsics:
-        """Intrinsics of ``subsample(image, stride)``: every ``stride``-th pixel from (0, 0)."""
+        """Intrinsics of ``subsample(image, stride)``: every ``stride``-th pixel from (0, 0).
+
+        Kept pixel i is pixel ``i*stride``, whose ray passes through ``u = i*stride + 0.5``;
+        so that it passes through ``i + 0.5`` in the subsampled image, the principal point
+        moves to ``cx/stride + 0.5 - 0.5/stride``.
+        """
         if stride < 1:
             raise ValueError(f"subsampling stride must be >= 1, got {stride}")
+        shift = 0.5 - 0.5 / stride
         return CameraIntrinsics(
             width=-(-self.width // stride),
             height=-(-self.height // stride),
             fx=self.fx / stride,
             fy=self.fy / stride,
-            cx=self.cx / stride,
-            cy=self.cy / stride,
+            cx=self.cx / stride + shift,
+            cy=self.cy / stride + shift,
         )
 
     def as_array(self) -> np.ndarray:

@@ -153,6 +153,7 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     )
     run.extra.update({name: np.array(v) for name, v in extra.items()})
     run.extra["wall_time_s"] = wall
+    run.extra["graphviz"] = diagram.GetGraphvizString(max_depth=1)
     return run
 
 

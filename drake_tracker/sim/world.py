@@ -456,25 +456,3 @@ def build_simulated_world(scenario: Scenario) -> tuple[Diagram, SimulatedWorld]:
     diagram = builder.Build()
     diagram.set_name("simulated_world")
     return diagram, world
-
-
-def encoders_only_X_CE(model: TrackerModel, readings: np.ndarray) -> np.ndarray:
-    """(T, 4, 4) hand poses in the NOMINAL camera frame from raw encoder readings
-    ``(T, n)`` (``model.robot_joint_names`` order, rad): forward kinematics of the
-    readings with the virtual camera joints at zero (the encoders-only baseline)."""
-    readings = np.atleast_2d(np.asarray(readings, float))
-    names = model.joint_names
-    idx = np.array([names.index(n) for n in model.robot_joint_names])
-    if readings.shape[1] != len(idx):
-        raise ValueError(f"encoders_only_X_CE: readings have {readings.shape[1]} columns, "
-                         f"the model has {len(idx)} robot joints")
-    plant = model.plant
-    context = plant.CreateDefaultContext()
-    q = np.zeros(plant.num_positions())
-    out = np.empty((len(readings), 4, 4))
-    for k, row in enumerate(readings):
-        q[idx] = row
-        plant.SetPositions(context, q)
-        out[k] = plant.CalcRelativeTransform(context, model.camera_frame,
-                                             model.end_effector_frame).GetAsMatrix4()
-    return out

@@ -23,7 +23,7 @@ from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
 
 #: Output ports of the Kalman bank that ``AddTracker`` exports.
 ESTIMATE_PORTS = ("estimated_position", "position_variance", "bias", "bias_variance",
-                  "camera_offset", "X_CE", "X_WE", "belief")
+                  "camera_offset", "X_CE", "X_WE", "X_WC", "belief")
 
 
 @dataclass

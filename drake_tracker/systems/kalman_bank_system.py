@@ -37,15 +37,16 @@ class JointKalmanBankSystem(LeafSystem):
         - camera_offset
         - X_CE
         - X_WE
+        - X_WC
 
     ``measured_position`` holds the robot joints' readings (``model.robot_joint_names``),
     ``measurement_time`` its stamp (s; a stamp not after the last one is not a new
     reading). ``correction`` is the delay buffer's :class:`BeliefCorrection`. Outputs
     cover all of ``model.joint_names`` (virtual joints included): ``belief`` is the
     (5, n) moment array flattened row-major; ``camera_offset`` the 6 virtual joints;
-    ``X_CE`` the hand in the estimated camera frame and ``X_WE`` in the model's world
-    (RigidTransform). Before the first reading the estimate is the model's zero
-    configuration.
+    ``X_CE`` the hand in the estimated camera frame, ``X_WE`` the hand and ``X_WC`` the
+    estimated camera in the model's world (RigidTransform). Before the first reading the
+    estimate is the model's zero configuration.
 
     Discrete state: [belief (5n), belief time, last reading time, correction id,
     started flag]. A reading with NaN is skipped with a logged warning.
@@ -83,6 +84,8 @@ class JointKalmanBankSystem(LeafSystem):
                                        lambda c, o: self._calc_pose(c, o, 0), deps)
         self.DeclareAbstractOutputPort("X_WE", lambda: AbstractValue.Make(RigidTransform()),
                                        lambda c, o: self._calc_pose(c, o, 1), deps)
+        self.DeclareAbstractOutputPort("X_WC", lambda: AbstractValue.Make(RigidTransform()),
+                                       lambda c, o: self._calc_pose(c, o, 2), deps)
         self.DeclarePeriodicDiscreteUpdateEvent(period_s, offset_s, self._update)
 
     # ----------------------------------------------------------------- state access
