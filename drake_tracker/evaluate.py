@@ -178,8 +178,8 @@ def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...]) -> list
         sequences, duration, interval = QUICK_SEQUENCES, QUICK_DURATION_S, QUICK_IMAGE_INTERVAL_S
         num_seeds = seeds or 1
     else:
-        sequences = tuple(s for s in SEQUENCES if s != "static")
-        duration, interval, num_seeds = None, 0.0, seeds or 10
+        sequences = SEQUENCES  # the 11 of the paper and `static`
+        duration, interval, num_seeds = None, QUICK_IMAGE_INTERVAL_S, seeds or 10
     return [Task(seq, bias, seed, duration, interval, methods)
             for seq in sequences for bias in BIASES for seed in range(num_seeds)]
 

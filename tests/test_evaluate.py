@@ -1,0 +1,93 @@
+"""The evaluation runner: methods as tracker configurations, tasks, summaries, plots and
+resuming."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from drake_tracker.evaluate import (
+    Task,
+    evaluate_run,
+    load_errors,
+    make_tasks,
+    plot_results,
+    run_task,
+    summarize,
+    write_summary,
+)
+from drake_tracker.methods import METHODS, method_params
+from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.synthetic import synthetic_run
+
+
+def test_methods_are_configurations_of_one_tracker():
+    assert not method_params("encoders_only").image.enabled
+    offset_only = method_params("camera_offset_only")
+    assert not offset_only.kalman.robot_joints.has_bias and offset_only.image.blocks == "camera"
+    assert not method_params("vision_only").use_joint_readings
+    assert method_params("full_fusion").image.enabled
+    with pytest.raises(ValueError, match="unknown method"):
+        method_params("magic")
+
+
+def test_task_lists_cover_the_protocol():
+    full = make_tasks(False, None, METHODS)
+    assert len(full) == 12 * 3 * 10
+    quick = make_tasks(True, None, METHODS)
+    assert {t.bias for t in quick} == {"none", "constant", "time-varying"}
+    assert {"in-out-in", "occlusion", "arm++"} <= {t.sequence for t in quick}
+    # The shortened in-out-in still leaves the view within its duration.
+    scenario = next(t for t in quick if t.sequence == "in-out-in").scenario()
+    tr = scenario.trajectory
+    assert tr.excursion_start_s + 2 * tr.excursion_ramp_s < scenario.duration_s
+
+
+def test_evaluate_run_orders_the_methods_on_a_biased_run():
+    model = build_tracker_model(robot_preset("apollo"))
+    run = synthetic_run(model, duration_s=2.0, bias_rad=np.radians(3.0), seed=1)
+    errors = evaluate_run(run, ("encoders_only", "full_fusion"), min_image_interval_s=0.0)
+    encoders = np.nanmedian(errors["encoders_only"]["translation_mm"])
+    fusion = np.nanmedian(errors["full_fusion"]["translation_mm"])
+    assert fusion < encoders / 3.0
+
+
+def _fake_rows(tmp_path):
+    rng = np.random.default_rng(0)
+    (tmp_path / "results").mkdir()
+    for seq in ("s-full-arm", "occlusion"):
+        path = tmp_path / "results" / f"{seq}__constant__seed0.csv"
+        with path.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["sequence", "bias", "method", "seed", "time_s", "translation_mm",
+                        "rotation_deg"])
+            for method in METHODS:
+                for t in np.arange(0, 2, 0.05):
+                    w.writerow([seq, "constant", method, 0, t, rng.gamma(2, 5), rng.gamma(2)])
+    return load_errors(tmp_path)
+
+
+def test_summary_columns_and_percentiles(tmp_path):
+    rows = _fake_rows(tmp_path)
+    summary = summarize(rows)
+    assert len(summary) == 2 * len(METHODS) * 2
+    write_summary(summary, tmp_path)
+    with (tmp_path / "summary.csv").open() as f:
+        reader = csv.DictReader(f)
+        assert reader.fieldnames == ["sequence", "bias", "method", "metric", "p1", "p25",
+                                     "p50", "p75", "p99"]
+        first = next(reader)
+    values = [float(r["translation_mm"]) for r in rows
+              if (r["sequence"], r["method"]) == (first["sequence"], first["method"])]
+    assert float(first["p50"]) == pytest.approx(np.median(values), abs=1e-3)
+    paths = plot_results(rows, tmp_path)
+    assert all(p.stat().st_size > 0 for p in paths)
+
+
+def test_a_finished_task_is_not_run_again(tmp_path):
+    task = Task("s-full-arm", "constant", 0, 1.0, 0.1, ("encoders_only",))
+    result = tmp_path / "results" / f"{task.name}.csv"
+    result.parent.mkdir(parents=True)
+    result.write_text("sentinel")
+    assert run_task(task, tmp_path) == task.name
+    assert result.read_text() == "sentinel"
