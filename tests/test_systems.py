@@ -169,3 +169,37 @@ def test_diagram_context_can_be_copied_and_resimulated(apollo):
     simulator.AdvanceTo(0.25)
     second = port.Eval(tracker.kalman_bank.GetMyContextFromRoot(simulator.get_context()))
     np.testing.assert_array_equal(first, second)
+
+
+def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, caplog):
+    import logging
+
+    from drake_tracker.core.renderer import default_view_configuration
+    from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
+    from drake_tracker.systems.messages import ImagePrior
+
+    p = params()
+    p.image.min_image_interval_s = 0.0
+    system = CpfImageUpdateSystem(apollo, CAMERA, p, period_s=0.01)
+    context = system.CreateDefaultContext()
+    run = synthetic_run(apollo, duration_s=0.2, seed=2)
+    frame = DepthFrame(0.0, 0.05, run.depth_images_m[0], 0)
+    _, belief = make_bank_and_prior(apollo, p, default_view_configuration(apollo)[
+        [apollo.joint_names.index(n) for n in apollo.robot_joint_names]])
+    system.GetInputPort("depth_frame").FixValue(context, frame)
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(0, 0.0, belief, ""))
+    simulator = Simulator(system, context)
+    simulator.AdvanceTo(0.015)
+    message = system.GetOutputPort("image_observation").Eval(context)
+    assert message.id == 1 and message.sequence == 0 and message.image_time_s == 0.0
+    assert np.all(np.isfinite(message.observation.precision))
+    simulator.AdvanceTo(0.035)  # the same frame again: nothing new
+    assert system.GetOutputPort("image_observation").Eval(context).id == 1
+    # A malformed image is skipped with a warning, not raised inside the simulation.
+    bad = DepthFrame(0.03, 0.06, np.ones((10, 10), np.float32), 1)
+    system.GetInputPort("depth_frame").FixValue(context, bad)
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.03, belief, ""))
+    with caplog.at_level(logging.WARNING):
+        simulator.AdvanceTo(0.055)
+    assert "image 1 skipped" in caplog.text
+    assert system.GetOutputPort("image_observation").Eval(context).id == 1
