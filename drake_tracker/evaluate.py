@@ -47,6 +47,8 @@ class Task:
     duration_s: float | None
     min_image_interval_s: float
     methods: tuple[str, ...]
+    #: Tracker parameters (YAML of TrackerParams) the methods start from; "" = defaults.
+    params_yaml: str = ""
 
     @property
     def name(self) -> str:
@@ -112,7 +114,8 @@ def _sample_times(run, period_s: float) -> np.ndarray:
 
 
 def evaluate_run(run, methods: Iterable[str], min_image_interval_s: float = 0.0,
-                 sample_period_s: float = SAMPLE_PERIOD_S) -> dict[str, dict[str, np.ndarray]]:
+                 sample_period_s: float = SAMPLE_PERIOD_S, base_params=None
+                 ) -> dict[str, dict[str, np.ndarray]]:
     """Errors of each method on one recorded run, at regular sample times.
 
     Returns {method: {"times_s", "translation_mm", "rotation_deg"}}.
@@ -130,7 +133,7 @@ def evaluate_run(run, methods: Iterable[str], min_image_interval_s: float = 0.0,
         if method == "encoders_only":
             X = encoders_only_X_CE(run, model)[truth_index]
         else:
-            params = method_params(method, initial_positions_rad=initial)
+            params = method_params(method, base_params, initial_positions_rad=initial)
             params.image.min_image_interval_s = min_image_interval_s
             X = replay_run(run, params, model, sample_times_s=times).X_CE
         ok = np.all(np.isfinite(X.reshape(len(X), -1)), axis=1)
@@ -139,6 +142,19 @@ def evaluate_run(run, methods: Iterable[str], min_image_interval_s: float = 0.0,
         t_err[ok], r_err[ok] = pose_errors(X[ok], X_true[ok])
         out[method] = {"times_s": times, "translation_mm": t_err, "rotation_deg": r_err}
     return out
+
+
+def task_base_params(task: Task):
+    """The TrackerParams a task's methods start from (None: the defaults)."""
+    if not task.params_yaml:
+        return None
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_tracker.params import TrackerParams, validate_tracker_params
+
+    params = yaml_load_typed(schema=TrackerParams, data=task.params_yaml)
+    validate_tracker_params(params)
+    return params
 
 
 def run_task(task: Task, out_dir: Path) -> str:
@@ -155,7 +171,8 @@ def run_task(task: Task, out_dir: Path) -> str:
     else:
         run = simulate_and_record(task.scenario())
         run.save(run_path)
-    errors = evaluate_run(run, task.methods, task.min_image_interval_s)
+    errors = evaluate_run(run, task.methods, task.min_image_interval_s,
+                          base_params=task_base_params(task))
     tmp = result_path.with_suffix(".tmp")
     tmp.parent.mkdir(parents=True, exist_ok=True)
     with tmp.open("w", newline="") as f:
@@ -180,7 +197,8 @@ class _TaskRunner:
         return run_task(task, self.out_dir)
 
 
-def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...]) -> list[Task]:
+def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...],
+               params_yaml: str = "") -> list[Task]:
     from drake_tracker.sim.scenario import SEQUENCES
 
     if quick:
@@ -189,7 +207,7 @@ def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...]) -> list
     else:
         sequences = SEQUENCES  # the 11 of the paper and `static`
         duration, interval, num_seeds = None, QUICK_IMAGE_INTERVAL_S, seeds or 10
-    return [Task(seq, bias, seed, duration, interval, methods)
+    return [Task(seq, bias, seed, duration, interval, methods, params_yaml)
             for seq in sequences for bias in BIASES for seed in range(num_seeds)]
 
 
@@ -337,7 +355,12 @@ def run_evaluate(args) -> int:
     for m in methods:
         if m not in METHODS:
             raise SystemExit(f"unknown method '{m}'; known: {list(METHODS)}")
-    tasks = make_tasks(args.quick, args.seeds, methods)
+    params_yaml = ""
+    if getattr(args, "params", None):
+        from drake_tracker.params import load_tracker_params, tracker_params_to_yaml
+
+        params_yaml = tracker_params_to_yaml(load_tracker_params(args.params))
+    tasks = make_tasks(args.quick, args.seeds, methods, params_yaml)
     todo = [t for t in tasks if not (out_dir / "results" / f"{t.name}.csv").exists()]
     print(f"{len(tasks)} tasks, {len(tasks) - len(todo)} already done, {len(todo)} to run "
           f"with {args.workers} worker(s)")

@@ -14,6 +14,7 @@ from drake_tracker.evaluate import (
     plot_results,
     run_task,
     summarize,
+    task_base_params,
     write_summary,
 )
 from drake_tracker.methods import METHODS, method_params
@@ -91,3 +92,16 @@ def test_a_finished_task_is_not_run_again(tmp_path):
     result.write_text("sentinel")
     assert run_task(task, tmp_path) == task.name
     assert result.read_text() == "sentinel"
+
+
+def test_a_parameter_file_reaches_every_task(tmp_path):
+    from drake_tracker.params import load_tracker_params, tracker_params_to_yaml
+
+    path = tmp_path / "single.yaml"
+    path.write_text("image:\n  annealing_betas: [1.0]\n  num_particles: 200\n")
+    tasks = make_tasks(True, None, ("full_fusion",),
+                       tracker_params_to_yaml(load_tracker_params(path)))
+    for task in tasks:
+        params = task_base_params(task)
+        assert params.image.annealing_betas == [1.0] and params.image.num_particles == 200
+    assert task_base_params(Task("arm", "none", 0, None, 0.1, ("full_fusion",))) is None
