@@ -304,7 +304,7 @@ def _stored_scenario(out_dir: Path, seq: str, bias: str, seed: int):
     from drake_tracker.recording import RecordedRun
     from drake_tracker.sim.scenario import Scenario, load_scenario
 
-    path = out_dir / "runs" / f"{seq.replace('+', 'p')}__{bias}__seed{seed}.npz"
+    path = out_dir / "runs" / f"{Task(seq, bias, seed, None, 0.0, ()).name}.npz"
     if path.exists():
         text = RecordedRun.load(path).scenario_yaml
         if text:

@@ -100,7 +100,7 @@ class ImageProcessor:
             tuple(im.annealing_betas))
 
     def image_time(self, frame: DepthFrame) -> float:
-        return float(frame.capture_time_s) - self.params.image.image_time_offset_s
+        return image_time(frame, self.params)
 
     def wants(self, frame: DepthFrame, last_processed_time_s: float) -> bool:
         """Whether ``frame`` is due: images closer than ``min_image_interval_s`` to the
@@ -160,6 +160,18 @@ def camera_chain_joints(model) -> list[str]:
     return chain
 
 
+def image_time(frame: DepthFrame, params: TrackerParams) -> float:
+    """The time t' an image is applied at: its capture stamp minus the configured offset."""
+    return float(frame.capture_time_s) - params.image.image_time_offset_s
+
+
+def new_belief_buffer(model, params: TrackerParams, t: float,
+                      first_reading: np.ndarray | None) -> BeliefBuffer:
+    """The delay buffer started at ``t`` from the first reading (None: vision only)."""
+    bank, prior = make_bank_and_prior(model, params, first_reading)
+    return BeliefBuffer(bank, prior, t, params.buffer_horizon_s)
+
+
 def robot_joint_indices(model) -> np.ndarray:
     """Indices of the robot (measured) joints within ``model.joint_names``."""
     return np.array([model.joint_names.index(n) for n in model.robot_joint_names], int)
@@ -215,8 +227,7 @@ class Tracker:
             self._start(0.0, None)
 
     def _start(self, t: float, first_reading: np.ndarray | None) -> None:
-        bank, prior = make_bank_and_prior(self.model, self.params, first_reading)
-        self.buffer = BeliefBuffer(bank, prior, t, self.params.buffer_horizon_s)
+        self.buffer = new_belief_buffer(self.model, self.params, t, first_reading)
 
     def add_reading(self, t: float, robot_reading: np.ndarray) -> None:
         """An encoder reading of the robot joints (``model.robot_joint_names`` order),

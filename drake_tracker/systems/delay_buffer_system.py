@@ -14,7 +14,12 @@ from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
-from drake_tracker.tracker import full_reading, make_bank_and_prior
+from drake_tracker.tracker import (
+    full_reading,
+    image_time,
+    make_bank_and_prior,
+    new_belief_buffer,
+)
 
 log = logging.getLogger(__name__)
 
@@ -96,14 +101,12 @@ class DelayBufferSystem(LeafSystem):
                 log.warning("joint reading at %.4f s skipped: it is not finite", t)
             elif self._params.use_joint_readings:
                 if s.buffer is None:
-                    bank, prior = make_bank_and_prior(self._model, self._params, reading)
-                    s.buffer = BeliefBuffer(bank, prior, t, self._params.buffer_horizon_s)
+                    s.buffer = new_belief_buffer(self._model, self._params, t, reading)
                 s.buffer.add_reading(t, full_reading(self._model, reading))
                 s.last_reading_time_s = t
             else:
                 if s.buffer is None:
-                    bank, prior = make_bank_and_prior(self._model, self._params, None)
-                    s.buffer = BeliefBuffer(bank, prior, 0.0, self._params.buffer_horizon_s)
+                    s.buffer = new_belief_buffer(self._model, self._params, 0.0, None)
                 s.buffer.advance_to(t)
                 s.last_reading_time_s = t
         message = self.get_input_port(2).Eval(context)
@@ -129,7 +132,7 @@ class DelayBufferSystem(LeafSystem):
         if frame.is_empty:
             output.set_value(ImagePrior())
             return
-        t = float(frame.capture_time_s) - self._params.image.image_time_offset_s
+        t = image_time(frame, self._params)
         if s.buffer is None:
             output.set_value(ImagePrior(frame.sequence, t, None, "no joint reading yet"))
             return
