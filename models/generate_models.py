@@ -5,7 +5,8 @@ nothing is downloaded. The generated files are committed; this script documents 
 
 * ``apollo.sdf``: an Apollo-like platform. A fixed torso, a 7-DoF arm with KUKA LWR IV
   kinematics (shoulder height 0.31 m, upper arm 0.40 m, forearm 0.39 m, flange 0.078 m,
-  limits +-170/120/170/120/170/120/170 deg), a three-finger hand (rigid), and a pan-tilt
+  limits +-170/120/170/120/170/120/170 deg), a BarrettHand-sized three-finger hand (rigid), off-axis
+  motor housings on the roll links, and a pan-tilt
   head carrying the depth camera frame ``camera_optical`` (Drake camera convention:
   +z forward, +x right, +y down).
 * ``arm6_on_stand.urdf``: a different robot. A 6-DoF arm on a pedestal with a two-finger
@@ -111,20 +112,26 @@ def apollo_sdf() -> str:
     # Arm: KUKA LWR IV kinematics, mounted upright on a shelf in front of the torso.
     # Joint origins along each link's +z; J1 at the base top, J2 0.31 m above the base.
     # (link, parent, offset of this link's joint in the parent, axis, limit, visuals)
+    # The links are not bodies of revolution about their own joint axes: like the LWR's,
+    # roll links 1, 3 and 5 carry an off-axis motor housing, so a depth image sees their
+    # roll angles (a bare cylinder would hide them); the hand shows joint 7's.
     r = 0.06
     arm = [
         ("arm_link_1", "arm_link_0", 0.11, "0 0 1", 170,
-         _visual("v", "0 0 0.1 0 0 0", _cyl(r, 0.2), ARM_ORANGE)),
+         _visual("v", "0 0 0.1 0 0 0", _cyl(r, 0.2), ARM_ORANGE)
+         + _visual("housing", "0.05 0 0.12 0 0 0", _box(0.07, 0.08, 0.10), ARM_ORANGE)),
         ("arm_link_2", "arm_link_1", 0.20, "0 1 0", 120,
          _visual("j", "0 0 0 0 0 0", _sphere(r), ARM_ORANGE)
          + _visual("v", "0 0 0.1 0 0 0", _cyl(r, 0.2), ARM_ORANGE)),
         ("arm_link_3", "arm_link_2", 0.20, "0 0 1", 170,
-         _visual("v", "0 0 0.1 0 0 0", _cyl(r, 0.2), ARM_ORANGE)),
+         _visual("v", "0 0 0.1 0 0 0", _cyl(r, 0.2), ARM_ORANGE)
+         + _visual("housing", "0 0.05 0.12 0 0 0", _box(0.08, 0.07, 0.10), ARM_ORANGE)),
         ("arm_link_4", "arm_link_3", 0.20, "0 -1 0", 120,
          _visual("j", "0 0 0 0 0 0", _sphere(r), ARM_ORANGE)
          + _visual("v", "0 0 0.1 0 0 0", _cyl(0.055, 0.2), ARM_ORANGE)),
         ("arm_link_5", "arm_link_4", 0.20, "0 0 1", 170,
-         _visual("v", "0 0 0.095 0 0 0", _cyl(0.05, 0.19), ARM_ORANGE)),
+         _visual("v", "0 0 0.095 0 0 0", _cyl(0.05, 0.19), ARM_ORANGE)
+         + _visual("housing", "0.045 0 0.11 0 0 0", _box(0.06, 0.07, 0.09), ARM_ORANGE)),
         ("arm_link_6", "arm_link_5", 0.19, "0 1 0", 120,
          _visual("j", "0 0 0 0 0 0", _sphere(0.055), ARM_ORANGE)),
         ("arm_link_7", "arm_link_6", 0.03, "0 0 1", 170,
@@ -144,18 +151,23 @@ def apollo_sdf() -> str:
         parts.append(_sdf_link(link, parent, f"0 0 {offset} 0 0 0", visuals))
         parts.append(_sdf_revolute(f"arm_joint_{i}", parent, link, axis, -limit, limit))
 
-    # Three-finger hand, rigid, on the flange (0.048 m above joint 7's origin).
-    hand = _visual("palm", "0 0 0.015 0 0 0", _cyl(0.045, 0.03), DARK)
-    for k in range(3):
-        ang = 2.0 * math.pi * k / 3.0
-        x, y = 0.03 * math.cos(ang), 0.03 * math.sin(ang)
-        hand += _visual(f"finger_{k}", f"{x:.6f} {y:.6f} 0.075 0 0 {ang:.6f}",
-                        _box(0.02, 0.025, 0.09), GREY)
+    # Three-finger hand in the BarrettHand's layout and size, rigid, on the flange
+    # (0.048 m above joint 7's origin): a rectangular palm, two fingers on one side and
+    # the thumb on the other, each finger a proximal and an inward-bent distal link.
+    # The layout has no rotational symmetry, so the image sees joint 7.
+    hand = _visual("palm", "0 0 0.04 0 0 0", _box(0.09, 0.12, 0.08), DARK)
+    for k, (x, y) in enumerate(((0.025, 0.04), (-0.025, 0.04), (0.0, -0.04))):
+        bend = 0.5 if y > 0 else -0.5  # distal links lean toward the palm's centre
+        hand += _visual(f"finger_{k}_proximal", f"{x} {y} 0.12 0 0 0",
+                        _box(0.025, 0.02, 0.08), GREY)
+        hand += _visual(f"finger_{k}_distal",
+                        f"{x} {y - 0.017 * math.copysign(1, y):.4f} 0.19 {bend} 0 0",
+                        _box(0.022, 0.018, 0.07), GREY)
     parts.append(_sdf_link("hand", "arm_link_7", "0 0 0.048 0 0 0", hand, mass=1.0))
     parts.append(_sdf_fixed("hand_weld", "arm_link_7", "hand"))
     parts.append(
         '<frame name="end_effector" attached_to="hand"><pose relative_to="hand">'
-        "0 0 0.10 0 0 0</pose></frame>"
+        "0 0 0.16 0 0 0</pose></frame>"
     )
 
     # Pan-tilt head; the camera looks along the tilt link's +x (down for positive tilt).
