@@ -80,6 +80,9 @@ def _add_evaluate(sub) -> None:
     p.add_argument("--methods", default=None,
                    help="comma-separated subset of the methods (default: all four)")
     p.add_argument("--workers", type=int, default=2, help="processes (default: %(default)s)")
+    p.add_argument("--settle-s", type=float, default=5.0,
+                   help="the summary and box plots use errors from this time on (s, "
+                        "default %(default)s); errors.csv keeps every sample")
     p.add_argument("--params", default=None,
                    help="tracker parameters YAML the methods start from (default: defaults); "
                         "use a new --out folder per parameter file (results are resumed)")

@@ -37,6 +37,10 @@ QUICK_IMAGE_INTERVAL_S = 0.1
 BIASES = ("none", "constant", "time-varying")
 #: Errors are sampled every this many seconds.
 SAMPLE_PERIOD_S = 0.05
+#: The summary and box plots use the errors from this time on (s): the targets are
+#: stated after the first 5 s of each sequence, once the tracker has converged from
+#: its start. errors.csv and the time series keep every sample.
+SETTLE_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -68,7 +72,9 @@ class Task:
             t.excursion_duration_s = 0.4 * d
             o = scenario.occluder
             o.start_s, o.end_s = 0.25 * d, 0.85 * d
-            scenario.encoders.step_period_s = min(scenario.encoders.step_period_s, 0.3 * d)
+            e = scenario.encoders
+            e.step_period_s = min(e.step_period_s, 0.3 * d)
+            e.step_transition_s = min(e.step_transition_s, 0.5 * e.step_period_s)
             scenario.duration_s = d
         return scenario
 
@@ -219,10 +225,16 @@ def load_errors(out_dir: Path) -> list[dict]:
     return rows
 
 
-def summarize(rows: list[dict]) -> list[dict]:
-    """Percentiles per (sequence, bias, method, metric) over all seeds and samples."""
+def settled(rows: list[dict], settle_s: float) -> list[dict]:
+    """The rows sampled at or after ``settle_s`` (s from the start of their run)."""
+    return [r for r in rows if float(r["time_s"]) >= settle_s - 1e-9]
+
+
+def summarize(rows: list[dict], settle_s: float = 0.0) -> list[dict]:
+    """Percentiles per (sequence, bias, method, metric) over all seeds and the samples
+    from ``settle_s`` on."""
     groups: dict[tuple, list[tuple[float, float]]] = {}
-    for r in rows:
+    for r in settled(rows, settle_s):
         key = (r["sequence"], r["bias"], r["method"])
         groups.setdefault(key, []).append((float(r["translation_mm"]), float(r["rotation_deg"])))
     summary = []
@@ -255,8 +267,9 @@ def write_summary(summary: list[dict], out_dir: Path) -> str:
     return text
 
 
-def plot_results(rows: list[dict], out_dir: Path) -> list[Path]:
-    """Box plots per metric (one box per method and sequence/bias) and time series."""
+def plot_results(rows: list[dict], out_dir: Path, settle_s: float = 0.0) -> list[Path]:
+    """Box plots per metric (one box per method and sequence/bias) of the samples from
+    ``settle_s`` on, and time series of every sample."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -273,7 +286,7 @@ def plot_results(rows: list[dict], out_dir: Path) -> list[Path]:
         for i, method in enumerate(methods):
             data = []
             for case in cases:
-                v = np.array([float(r[metric]) for r in rows
+                v = np.array([float(r[metric]) for r in settled(rows, settle_s)
                               if (r["sequence"], r["bias"]) == case and r["method"] == method])
                 data.append(v[np.isfinite(v)])
             positions = np.arange(len(cases)) + (i - (len(methods) - 1) / 2) * width
@@ -286,6 +299,8 @@ def plot_results(rows: list[dict], out_dir: Path) -> list[Path]:
         ax.set_xticklabels([f"{s}\n{b}" for s, b in cases], fontsize=7)
         ax.set_yscale("log")
         ax.set_ylabel(unit + ", whiskers p1-p99")
+        if settle_s > 0:
+            ax.set_title(f"errors from t = {settle_s:g} s on", fontsize=9)
         ax.legend(fontsize=8)
         fig.tight_layout()
         path = out_dir / f"boxplot_{metric}.png"
@@ -293,7 +308,8 @@ def plot_results(rows: list[dict], out_dir: Path) -> list[Path]:
         plt.close(fig)
         written.append(path)
     for seq, bias in cases:
-        written.append(_plot_time_series(rows, seq, bias, methods, colors, out_dir, plt))
+        written.append(_plot_time_series(rows, seq, bias, methods, colors, out_dir, plt,
+                                         settle_s))
     return written
 
 
@@ -312,7 +328,7 @@ def _stored_scenario(out_dir: Path, seq: str, bias: str, seed: int):
     return load_scenario(f"{seq}/{bias}", validate=False)
 
 
-def _plot_time_series(rows, seq, bias, methods, colors, out_dir, plt) -> Path:
+def _plot_time_series(rows, seq, bias, methods, colors, out_dir, plt, settle_s) -> Path:
     seed0 = min(int(r["seed"]) for r in rows if (r["sequence"], r["bias"]) == (seq, bias))
     scenario = _stored_scenario(out_dir, seq, bias, seed0)
     fig, ax = plt.subplots(figsize=(9, 3.5))
@@ -336,6 +352,8 @@ def _plot_time_series(rows, seq, bias, methods, colors, out_dir, plt) -> Path:
         ax.axvspan(tr.excursion_start_s, min(t_end, tr.excursion_start_s
                                              + 2 * tr.excursion_ramp_s + tr.excursion_duration_s),
                    color="0.9", label="leaving / out of view")
+    if 0 < settle_s < t_end:
+        ax.axvline(settle_s, color="tab:red", ls="--", lw=0.8, label="summary from here")
     ax.set_yscale("log")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("translation error (mm)")
@@ -348,40 +366,83 @@ def _plot_time_series(rows, seq, bias, methods, colors, out_dir, plt) -> Path:
     return path
 
 
-def run_evaluate(args) -> int:
-    out_dir = Path(args.out)
+def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
+             settle_s: float = SETTLE_S, progress: bool = True) -> list[dict]:
+    """Runs the tasks not done yet in ``out_dir`` and writes errors.csv, the summary
+    (summary.csv, summary.txt) and the figures there; returns the summary rows."""
+    out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    _check_same_protocol(tasks, out_dir)
+    executor = executor or SerialExecutor()
+    todo = [t for t in tasks if not (out_dir / "results" / f"{t.name}.csv").exists()]
+    if progress:
+        print(f"{len(tasks)} tasks, {len(tasks) - len(todo)} already done, {len(todo)} to "
+              f"run")
+    start = time.perf_counter()
+    for done, name in enumerate(executor.map_unordered(_TaskRunner(out_dir), todo), 1):
+        if progress:
+            elapsed = time.perf_counter() - start
+            bar = "#" * int(30 * done / max(1, len(todo)))
+            sys.stderr.write(f"\r[{bar:<30}] {done}/{len(todo)} {elapsed:6.0f} s  {name}    ")
+            sys.stderr.flush()
+    if todo and progress:
+        sys.stderr.write("\n")
+    names = {t.name for t in tasks}
+    rows = [r for r in load_errors(out_dir) if _row_task_name(r) in names]
+    with (out_dir / "errors.csv").open("w", newline="") as f:
+        if rows:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+    summary = summarize(rows, settle_s)
+    text = write_summary(summary, out_dir)
+    plot_results(rows, out_dir, settle_s)
+    if progress:
+        print(text)
+        print(f"wrote {out_dir}/summary.csv (errors from t = {settle_s:g} s on), errors.csv "
+              f"and figures in {time.perf_counter() - start:.0f} s")
+    return summary
+
+
+def _check_same_protocol(tasks: list[Task], out_dir: Path) -> None:
+    """Result files are named by sequence, bias and seed only; refuse to mix results of
+    different durations, image rates, methods or parameters in one folder."""
+    import json
+
+    settings = sorted({json.dumps([t.duration_s, t.min_image_interval_s, list(t.methods),
+                                   t.params_yaml])
+                       for t in tasks})
+    path = out_dir / "protocol.json"
+    if path.exists():
+        stored = json.loads(path.read_text())
+        if stored != settings:
+            raise ValueError(f"{out_dir} holds results of another protocol (duration, image "
+                             f"interval, methods or parameters: {stored}); use a new --out folder")
+    else:
+        path.write_text(json.dumps(settings))
+
+
+def _row_task_name(row: dict) -> str:
+    return Task(row["sequence"], row["bias"], int(row["seed"]), None, 0.0, ()).name
+
+
+def run_evaluate(args) -> int:
     methods = tuple(args.methods.split(",")) if args.methods else METHODS
     for m in methods:
         if m not in METHODS:
             raise SystemExit(f"unknown method '{m}'; known: {list(METHODS)}")
+    if args.settle_s < 0:
+        raise SystemExit(f"--settle-s must be >= 0, got {args.settle_s}")
     params_yaml = ""
     if getattr(args, "params", None):
         from drake_tracker.params import load_tracker_params, tracker_params_to_yaml
 
         params_yaml = tracker_params_to_yaml(load_tracker_params(args.params))
     tasks = make_tasks(args.quick, args.seeds, methods, params_yaml)
-    todo = [t for t in tasks if not (out_dir / "results" / f"{t.name}.csv").exists()]
-    print(f"{len(tasks)} tasks, {len(tasks) - len(todo)} already done, {len(todo)} to run "
-          f"with {args.workers} worker(s)")
     executor = SerialExecutor() if args.workers <= 1 else ProcessExecutor(args.workers)
-    start = time.perf_counter()
-    for done, name in enumerate(executor.map_unordered(_TaskRunner(out_dir), todo), 1):
-        elapsed = time.perf_counter() - start
-        bar = "#" * int(30 * done / max(1, len(todo)))
-        sys.stderr.write(f"\r[{bar:<30}] {done}/{len(todo)} {elapsed:6.0f} s  {name}    ")
-        sys.stderr.flush()
-    if todo:
-        sys.stderr.write("\n")
-    rows = load_errors(out_dir)
-    with (out_dir / "errors.csv").open("w", newline="") as f:
-        if rows:
-            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
-    summary = summarize(rows)
-    print(write_summary(summary, out_dir))
-    plot_results(rows, out_dir)
-    print(f"wrote {out_dir}/summary.csv, errors.csv and figures in "
-          f"{time.perf_counter() - start:.0f} s")
+    print(f"{args.workers} worker(s)")
+    try:
+        evaluate(tasks, Path(args.out), executor, args.settle_s)
+    except ValueError as e:
+        raise SystemExit(str(e)) from None
     return 0

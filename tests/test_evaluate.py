@@ -105,3 +105,46 @@ def test_a_parameter_file_reaches_every_task(tmp_path):
         params = task_base_params(task)
         assert params.image.annealing_betas == [1.0] and params.image.num_particles == 200
     assert task_base_params(Task("arm", "none", 0, None, 0.1, ("full_fusion",))) is None
+
+
+def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
+    """One short sequence, two methods, one seed, through the same entry point as the
+    command; the summary is checked against numpy on the written samples."""
+    from drake_tracker.evaluate import evaluate
+
+    task = Task("s-full-arm", "constant", 0, 1.5, 0.1, ("encoders_only", "full_fusion"))
+    settle_s = 0.5
+    summary = evaluate([task], tmp_path, settle_s=settle_s, progress=False)
+    for name in ("errors.csv", "summary.csv", "summary.txt", "boxplot_translation_mm.png",
+                 "boxplot_rotation_deg.png", "timeseries_s-full-arm_constant.png",
+                 f"runs/{task.name}.npz", f"results/{task.name}.csv"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    with (tmp_path / "errors.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert {r["method"] for r in rows} == {"encoders_only", "full_fusion"}
+    assert min(float(r["time_s"]) for r in rows) < settle_s  # every sample is kept
+    with (tmp_path / "summary.csv").open() as f:
+        written = list(csv.DictReader(f))
+    assert len(written) == len(summary) == 2 * 2
+    for row in written:
+        values = np.array([float(r[row["metric"]]) for r in rows
+                           if r["method"] == row["method"] and float(r["time_s"]) >= settle_s])
+        assert len(values) >= 15 and np.all(np.isfinite(values))
+        for p in (1, 25, 50, 75, 99):
+            assert float(row[f"p{p}"]) == pytest.approx(np.percentile(values, p), abs=2e-3)
+    # The encoders carry 8.6 deg of bias on every arm joint: their error is large.
+    enc = next(r for r in written
+               if (r["method"], r["metric"]) == ("encoders_only", "translation_mm"))
+    assert float(enc["p50"]) > 50.0
+    # Resuming with another protocol in the same folder is refused, by name.
+    other = Task("s-full-arm", "constant", 0, 2.0, 0.1, ("encoders_only", "full_fusion"))
+    with pytest.raises(ValueError, match="another protocol"):
+        evaluate([other], tmp_path, progress=False)
+
+
+def test_summary_skips_the_settling_time():
+    rows = [{"sequence": "s", "bias": "none", "method": "full_fusion", "seed": "0",
+             "time_s": f"{t:.2f}", "translation_mm": "1000" if t < 5 else "2",
+             "rotation_deg": "1"} for t in np.arange(0, 10, 0.5)]
+    summary = summarize(rows, settle_s=5.0)
+    assert summary[0]["metric"] == "translation_mm" and summary[0]["p99"] == 2.0
