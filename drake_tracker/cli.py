@@ -77,6 +77,8 @@ def _add_evaluate(sub) -> None:
                    help="short runs of each kind of sequence and bias (<= 15 min here)")
     p.add_argument("--seeds", type=int, default=None,
                    help="runs per scenario (default: 1 quick, 10 full)")
+    p.add_argument("--sequences", default=None,
+                   help="comma-separated subset of the sequences (default: the mode's all)")
     p.add_argument("--methods", default=None,
                    help="comma-separated subset of the methods (default: all four)")
     p.add_argument("--workers", type=int, default=2, help="processes (default: %(default)s)")

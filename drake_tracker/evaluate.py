@@ -439,6 +439,13 @@ def run_evaluate(args) -> int:
 
         params_yaml = tracker_params_to_yaml(load_tracker_params(args.params))
     tasks = make_tasks(args.quick, args.seeds, methods, params_yaml)
+    if getattr(args, "sequences", None):
+        wanted = args.sequences.split(",")
+        known = sorted({t.sequence for t in tasks})
+        for name in wanted:
+            if name not in known:
+                raise SystemExit(f"unknown sequence '{name}' for this mode; known: {known}")
+        tasks = [t for t in tasks if t.sequence in wanted]
     executor = SerialExecutor() if args.workers <= 1 else ProcessExecutor(args.workers)
     print(f"{args.workers} worker(s)")
     try:
