@@ -148,3 +148,15 @@ def test_summary_skips_the_settling_time():
              "rotation_deg": "1"} for t in np.arange(0, 10, 0.5)]
     summary = summarize(rows, settle_s=5.0)
     assert summary[0]["metric"] == "translation_mm" and summary[0]["p99"] == 2.0
+
+
+def test_the_command_rejects_unknown_names_and_bad_settling(tmp_path):
+    from drake_tracker.cli import main
+
+    out = str(tmp_path / "out")
+    with pytest.raises(SystemExit, match="unknown sequence 'nope'"):
+        main(["evaluate", "--quick", "--sequences", "nope", "--out", out])
+    with pytest.raises(SystemExit, match="unknown method 'magic'"):
+        main(["evaluate", "--quick", "--methods", "magic", "--out", out])
+    with pytest.raises(SystemExit, match="--settle-s must be >= 0"):
+        main(["evaluate", "--quick", "--settle-s", "-1", "--out", out])
