@@ -43,6 +43,11 @@ SAMPLE_PERIOD_S = 0.05
 SETTLE_S = 5.0
 
 
+def task_name(sequence: str, bias: str, seed: int) -> str:
+    """The stem of a task's files in ``runs/`` and ``results/``."""
+    return f"{sequence.replace('+', 'p')}__{bias}__seed{seed}"
+
+
 @dataclass(frozen=True)
 class Task:
     sequence: str
@@ -56,7 +61,7 @@ class Task:
 
     @property
     def name(self) -> str:
-        return f"{self.sequence.replace('+', 'p')}__{self.bias}__seed{self.seed}"
+        return task_name(self.sequence, self.bias, self.seed)
 
     def scenario(self):
         """The preset with this task's seed; a shortened run keeps its events in it (the
@@ -276,6 +281,7 @@ def plot_results(rows: list[dict], out_dir: Path, settle_s: float = 0.0) -> list
     import matplotlib.pyplot as plt
 
     written = []
+    late = settled(rows, settle_s)
     cases = sorted({(r["sequence"], r["bias"]) for r in rows})
     methods = [m for m in METHODS if any(r["method"] == m for r in rows)]
     colors = dict(zip(METHODS, ("0.6", "tab:blue", "tab:orange", "tab:green")))
@@ -286,7 +292,7 @@ def plot_results(rows: list[dict], out_dir: Path, settle_s: float = 0.0) -> list
         for i, method in enumerate(methods):
             data = []
             for case in cases:
-                v = np.array([float(r[metric]) for r in settled(rows, settle_s)
+                v = np.array([float(r[metric]) for r in late
                               if (r["sequence"], r["bias"]) == case and r["method"] == method])
                 data.append(v[np.isfinite(v)])
             positions = np.arange(len(cases)) + (i - (len(methods) - 1) / 2) * width
@@ -320,7 +326,7 @@ def _stored_scenario(out_dir: Path, seq: str, bias: str, seed: int):
     from drake_tracker.recording import RecordedRun
     from drake_tracker.sim.scenario import Scenario, load_scenario
 
-    path = out_dir / "runs" / f"{Task(seq, bias, seed, None, 0.0, ()).name}.npz"
+    path = out_dir / "runs" / f"{task_name(seq, bias, seed)}.npz"
     if path.exists():
         text = RecordedRun.load(path).scenario_yaml
         if text:
@@ -388,7 +394,8 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
     if todo and progress:
         sys.stderr.write("\n")
     names = {t.name for t in tasks}
-    rows = [r for r in load_errors(out_dir) if _row_task_name(r) in names]
+    rows = [r for r in load_errors(out_dir)
+            if task_name(r["sequence"], r["bias"], int(r["seed"])) in names]
     with (out_dir / "errors.csv").open("w", newline="") as f:
         if rows:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
@@ -420,10 +427,6 @@ def _check_same_protocol(tasks: list[Task], out_dir: Path) -> None:
                              f"interval, methods or parameters: {stored}); use a new --out folder")
     else:
         path.write_text(json.dumps(settings))
-
-
-def _row_task_name(row: dict) -> str:
-    return Task(row["sequence"], row["bias"], int(row["seed"]), None, 0.0, ()).name
 
 
 def run_evaluate(args) -> int:

@@ -5,10 +5,10 @@ nothing is downloaded. The generated files are committed; this script documents 
 
 * ``apollo.sdf``: an Apollo-like platform. A fixed torso, a 7-DoF arm with KUKA LWR IV
   kinematics (shoulder height 0.31 m, upper arm 0.40 m, forearm 0.39 m, flange 0.078 m,
-  limits +-170/120/170/120/170/120/170 deg), a BarrettHand-sized three-finger hand (rigid), off-axis
-  motor housings on the roll links, and a pan-tilt
-  head carrying the depth camera frame ``camera_optical`` (Drake camera convention:
-  +z forward, +x right, +y down).
+  limits +-170/120/170/120/170/120/170 deg) with off-axis motor housings on roll links 1,
+  3 and 5, a BarrettHand-sized three-finger hand (rigid), and a pan-tilt head carrying
+  the depth camera frame ``camera_optical`` (Drake camera convention: +z forward, +x
+  right, +y down).
 * ``arm6_on_stand.urdf``: a different robot. A 6-DoF arm on a pedestal with a two-finger
   gripper given as an OBJ mesh (``meshes/gripper.obj``), watched by a camera on a fixed stand.
 """
