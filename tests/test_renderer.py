@@ -104,17 +104,17 @@ def test_fused_render_likelihood_equals_render_then_likelihood(model, configurat
             occluder_rate_per_m=2.0, occlusion_probability=0.3)):
         observation = prepare_observation(_observation_of(renderer, q_true, rng), params)
         expected = log_likelihoods(renderer.render(q), observation, params)
-        fused = renderer.log_likelihoods(q, observation, params)
+        fused = renderer.score(q, observation)
         assert fused.shape == (len(q),)
         assert np.ptp(expected) > 1.0  # the particles are actually told apart
         np.testing.assert_allclose(fused, expected, rtol=1e-9, atol=1e-9)
         # Particles are independent of their batch.
-        np.testing.assert_allclose(renderer.log_likelihoods(q[5:9], observation, params),
+        np.testing.assert_allclose(renderer.score(q[5:9], observation),
                                    expected[5:9], rtol=1e-9, atol=1e-9)
-    assert renderer.log_likelihoods(q[:0], observation, params).shape == (0,)
+    assert renderer.score(q[:0], observation).shape == (0,)
     with pytest.raises(ValueError, match="shape"):
         wrong = prepare_observation(np.ones((7, 9), np.float32), LikelihoodParams())
-        renderer.log_likelihoods(q, wrong, LikelihoodParams())
+        renderer.score(q, wrong)
 
 
 def test_culling_does_not_change_the_images(model):
@@ -123,12 +123,12 @@ def test_culling_does_not_change_the_images(model):
     configurations spread widely enough to put parts out of view and near the camera."""
     from dataclasses import replace
 
-    from drake_tracker.core.render_batched import _render_tables
+    from drake_tracker.core.rasterize import render_tables
 
     intrinsics = FULL.subsampled(8)
     culled = BatchedDepthRenderer(model, intrinsics)
     plain = BatchedDepthRenderer(model, intrinsics)
-    tables = list(_render_tables(replace(plain.meshes, triangle_closed=None),
+    tables = list(render_tables(replace(plain.meshes, triangle_closed=None),
                                  plain.kinematics.num_bodies))
     tables[5] = np.full_like(tables[5], 1e6)  # bounding-sphere radii
     plain._tables = tuple(tables)

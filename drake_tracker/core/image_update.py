@@ -20,7 +20,6 @@ from drake_tracker.core.kalman import MEAN_A, VAR_A
 from drake_tracker.core.likelihood import (
     LikelihoodParams,
     PreparedObservation,
-    log_likelihoods,
     prepare_observation,
 )
 from drake_tracker.core.renderer import make_renderer
@@ -104,16 +103,8 @@ class CpfImageUpdate:
     def log_likelihood(self, q: np.ndarray, observation: PreparedObservation) -> np.ndarray:
         """(N,) log-likelihoods of configurations q (N, n) for one observation."""
         t0 = time.perf_counter()
-        fused = getattr(self.renderer, "log_likelihoods", None)
-        if fused is not None:
-            out = fused(q, observation, self.likelihood)
-            self.times.render_s += time.perf_counter() - t0
-        else:
-            rendered = self.renderer.render(q)
-            t1 = time.perf_counter()
-            out = log_likelihoods(rendered, observation, self.likelihood)
-            self.times.render_s += t1 - t0
-            self.times.likelihood_s += time.perf_counter() - t1
+        out = self.renderer.score(q, observation)  # FK + render + pixel likelihood
+        self.times.render_s += time.perf_counter() - t0
         self.times.evaluations += len(q)
         return out
 

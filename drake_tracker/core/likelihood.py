@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
+
 
 @dataclass
 class LikelihoodParams:
@@ -61,7 +63,13 @@ def valid_pixels(z: np.ndarray, params: LikelihoodParams) -> np.ndarray:
 
 @dataclass
 class PreparedObservation:
-    """An observed image reduced to its valid pixels and their per-pixel constants."""
+    """An observed image reduced to its valid pixels and their per-pixel constants.
+
+    Built once per image by :func:`prepare_observation`, with everything a scorer needs
+    (the fused render-and-score kernel reads these arrays as they are): per valid pixel
+    p, contiguous float64 constants, and ``pixel_slot`` mapping each of the H*W pixels to
+    its p (-1: invalid). The scalar parameters are those it was prepared with.
+    """
 
     pixel_index: np.ndarray  # (P,) int64 flat indices into the H*W image
     z: np.ndarray  # (P,) observed depth
@@ -70,6 +78,12 @@ class PreparedObservation:
     occ_coeff: np.ndarray  # (1-w) λ exp(-λz + λ²σ²/2)
     log_p_occ_inf: np.ndarray  # log p_occ(z|∞)
     shape: tuple[int, int]
+    pixel_slot: np.ndarray  # (H*W,) int64: index p of each pixel, -1 if invalid
+    inv_sigma: np.ndarray  # 1/σ
+    lam_sigma2: np.ndarray  # λσ²
+    uniform: float  # w/Z_max
+    occluder_rate_per_m: float  # λ
+    occlusion_probability: float  # o
 
     @property
     def num_valid(self) -> int:
@@ -91,8 +105,14 @@ def prepare_observation(depth: np.ndarray, params: LikelihoodParams) -> Prepared
     gauss_coeff = (1.0 - w) / (sigma * math.sqrt(2.0 * math.pi))
     occ_coeff = (1.0 - w) * lam * np.exp(-lam * z + 0.5 * lam**2 * sigma**2)
     log_p_occ_inf = np.log(w / params.max_depth_m + occ_coeff)
-    return PreparedObservation(index, z, sigma, gauss_coeff, occ_coeff, log_p_occ_inf,
-                               depth.shape)
+    slot = np.full(flat.size, -1, dtype=np.int64)
+    slot[index] = np.arange(index.size)
+    return PreparedObservation(
+        pixel_index=index, z=z, sigma=sigma, gauss_coeff=gauss_coeff, occ_coeff=occ_coeff,
+        log_p_occ_inf=log_p_occ_inf, shape=tuple(depth.shape), pixel_slot=slot,
+        inv_sigma=1.0 / sigma, lam_sigma2=lam * np.square(sigma),
+        uniform=w / params.max_depth_m, occluder_rate_per_m=float(lam),
+        occlusion_probability=float(params.occlusion_probability))
 
 
 @numba.njit(parallel=True, cache=True)
@@ -119,9 +139,22 @@ def _sum_log_ratios(rendered, index, z, sigma, gauss_coeff, occ_coeff, log_p_occ
 
 def log_likelihoods(rendered: np.ndarray, observation: PreparedObservation,
                     params: LikelihoodParams) -> np.ndarray:
-    """Log-likelihood of each of N rendered (N, H, W) depth images (inf = not rendered)."""
+    """Log-likelihood of each of N rendered (N, H, W) depth images (inf = not rendered):
+    the plain reference implementation, one pixel after another."""
+    return _score_rendered(rendered, observation, params.tail_weight / params.max_depth_m,
+                           params.occluder_rate_per_m, params.occlusion_probability)
+
+
+def score_images(rendered: np.ndarray, observation: PreparedObservation) -> np.ndarray:
+    """:func:`log_likelihoods` under the parameters the observation was prepared with."""
+    return _score_rendered(rendered, observation, observation.uniform,
+                           observation.occluder_rate_per_m, observation.occlusion_probability)
+
+
+def _score_rendered(rendered, observation: PreparedObservation, uniform: float, lam: float,
+                    occlusion: float) -> np.ndarray:
     rendered = np.asarray(rendered)
-    if rendered.ndim != 3 or rendered.shape[1:] != observation.shape:
+    if rendered.ndim != 3 or rendered.shape[1:] != tuple(observation.shape):
         raise ValueError(f"rendered images have shape {rendered.shape}, expected "
                          f"(N, {observation.shape[0]}, {observation.shape[1]})")
     flat = rendered.reshape(rendered.shape[0], -1)
@@ -130,6 +163,4 @@ def log_likelihoods(rendered: np.ndarray, observation: PreparedObservation,
     return _sum_log_ratios(
         flat, observation.pixel_index, observation.z, observation.sigma,
         observation.gauss_coeff, observation.occ_coeff, observation.log_p_occ_inf,
-        params.tail_weight / params.max_depth_m, params.occluder_rate_per_m,
-        params.occlusion_probability,
-    )
+        uniform, lam, occlusion)

@@ -12,9 +12,34 @@ from drake_tracker.core.camera import CameraIntrinsics
 BACKENDS = ("batched", "drake")
 
 
+class RenderThenScore:
+    """Gives an image-only renderer (Drake's) the scoring entry point of the batched one:
+    ``score(q, observation)`` renders the (N, H, W) images, then scores them with the
+    plain likelihood (:func:`~drake_tracker.core.likelihood.score_images`)."""
+
+    def __init__(self, renderer):
+        self.renderer = renderer
+        self.model = renderer.model
+        self.intrinsics = renderer.intrinsics
+        self.near_m = renderer.near_m
+        self.far_m = renderer.far_m
+
+    def render(self, q: np.ndarray) -> np.ndarray:
+        """(N, H, W) float32 depth images of configurations q (N, nq), inf = no hit."""
+        return self.renderer.render(q)
+
+    def score(self, q: np.ndarray, observation) -> np.ndarray:
+        """(N,) log-likelihoods of configurations q (N, nq) against ``observation``."""
+        from drake_tracker.core.likelihood import score_images
+
+        return score_images(self.render(q), observation)
+
+
 def make_renderer(model, intrinsics: CameraIntrinsics, backend: str = "batched",
                   near_m: float = 0.1, far_m: float = 6.0):
-    """A renderer with ``render(q: (N, nq)) -> (N, H, W) float32`` (inf = no hit)."""
+    """A renderer with ``render(q: (N, nq)) -> (N, H, W) float32`` (inf = no hit) and
+    ``score(q, observation) -> (N,)`` log-likelihoods against a
+    :class:`~drake_tracker.core.likelihood.PreparedObservation` of its image size."""
     if backend == "batched":
         from drake_tracker.core.render_batched import BatchedDepthRenderer
 
@@ -22,7 +47,8 @@ def make_renderer(model, intrinsics: CameraIntrinsics, backend: str = "batched",
     if backend == "drake":
         from drake_tracker.core.render_drake import DrakeDepthRenderer
 
-        return DrakeDepthRenderer(model, intrinsics, near_m=near_m, far_m=far_m)
+        return RenderThenScore(DrakeDepthRenderer(model, intrinsics, near_m=near_m,
+                                                  far_m=far_m))
     raise ValueError(f"unknown renderer backend '{backend}'; known: {list(BACKENDS)}")
 
 
@@ -92,7 +118,7 @@ def benchmark_renderers(model, intrinsics: CameraIntrinsics, num_particles: int 
     best of ``repeats`` runs. Per-image times are in microseconds.
 
     Also timed: ``fused_us_per_evaluation``, one image update's likelihood evaluation
-    (FK + render + pixel likelihood, ``BatchedDepthRenderer.log_likelihoods``) per
+    (FK + render + pixel likelihood, ``BatchedDepthRenderer.score``) per
     particle, for ``num_particles`` particles spread by ``tracking_spread_rad`` around
     the view configuration, scored against a synthetic noisy image of that
     configuration (``likelihood``: a ``LikelihoodParams``, default its defaults); and
@@ -131,10 +157,9 @@ def benchmark_renderers(model, intrinsics: CameraIntrinsics, num_particles: int 
     observation = prepare_observation(synthetic_observation(batched, center, seed), params)
     q_track = random_configurations(model, num_particles, seed + 1,
                                     spread_rad=tracking_spread_rad, center=center)
-    batched.log_likelihoods(q_track[:2], observation, params)  # compile / load
+    batched.score(q_track[:2], observation)  # compile / load
     log_likelihoods(images_b[:2], observation, params)
-    t_fused, cpu_fused = _best_time(
-        lambda: batched.log_likelihoods(q_track, observation, params), repeats)
+    t_fused, cpu_fused = _best_time(lambda: batched.score(q_track, observation), repeats)
     t_separate, _ = _best_time(
         lambda: log_likelihoods(batched.render(q_track), observation, params), repeats)
     return {
