@@ -112,3 +112,27 @@ def test_bad_images_are_rejected():
         log_likelihoods(np.ones((2, 3, 3)), prepare_observation(np.ones((2, 2)), PARAMS), PARAMS)
     with pytest.raises(ValueError, match="occlusion_probability"):
         LikelihoodParams(occlusion_probability=1.0).validate()
+
+
+def test_fused_pixel_kernel_equals_scalar_formula():
+    """The branch-free pixel loop of the fused kernel (erfc table, safe fastmath flags)
+    against the direct transcription, term by term, over depths that reach both ends of
+    the erfc table (rendered far behind and far in front of the observation)."""
+    from drake_tracker.core.render_likelihood import _ERFC_COEFFS, pixel_log_ratios
+
+    rng = np.random.default_rng(5)
+    z = np.concatenate([rng.uniform(0.2, 5.9, 300), [0.3, 5.9, 1.0, 1.0]])
+    d = np.concatenate([z[:100] + rng.normal(0.0, 0.01, 100),  # near the peak
+                        rng.uniform(0.1, 6.0, 200),  # anywhere
+                        [0.1, 6.0, 1.0 + 1e-12, 0.1]])  # ends of the table, exact hit
+    observation = prepare_observation(z[None, :].astype(np.float64), PARAMS)
+    slots = np.arange(len(z), dtype=np.int64)
+    terms = np.empty(len(z))
+    o = observation
+    pixel_log_ratios(slots, d, len(z), o.z, o.inv_sigma, o.lam_sigma2, o.gauss_coeff,
+                     o.occ_coeff, o.log_p_occ_inf, o.uniform, o.occluder_rate_per_m,
+                     o.occlusion_probability, _ERFC_COEFFS, terms)
+    expected = np.array([_scalar_log_ratio(a, b, PARAMS) for a, b in zip(z, d)])
+    assert np.ptp(expected) > 5.0
+    # Stated tolerance: 1e-12 of the term's size (erfc table ~1e-15 absolute, FMA rounding).
+    np.testing.assert_allclose(terms, expected, rtol=1e-12, atol=1e-12)

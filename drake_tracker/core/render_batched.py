@@ -25,9 +25,13 @@ import numpy as np
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.geometry import DEFAULT_SEGMENTS, RobotMeshes, extract_robot_meshes
 from drake_tracker.core.kinematics import BatchedKinematics
+from drake_tracker.core.level_of_detail import LevelOfDetail, level_of_detail
 from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.core.rasterize import frustum_planes, num_chunks, render_kernel, render_tables
 from drake_tracker.core.render_likelihood import fused_scores
+
+#: The level of detail the renderer uses unless told otherwise.
+DEFAULT_DETAIL = LevelOfDetail()
 
 
 class BatchedDepthRenderer:
@@ -39,10 +43,14 @@ class BatchedDepthRenderer:
 
     def __init__(self, model, intrinsics: CameraIntrinsics, near_m: float = 0.1,
                  far_m: float = 6.0, segments: int = DEFAULT_SEGMENTS,
-                 pixel_center_offset: float = 0.5):
+                 pixel_center_offset: float = 0.5,
+                 detail: LevelOfDetail | None = DEFAULT_DETAIL):
         """``pixel_center_offset``: pixel (i, j) samples u = i + offset, v = j + offset.
         0.5 reproduces Drake's RenderEngineVtk images; 0.0 is the integer-centre reading.
-        ``segments``: tessellation of curved shapes (see ``geometry``)."""
+        ``segments``: tessellation of curved shapes (see ``geometry``). ``detail``: the
+        meshes are simplified to this level of detail for this image size (see
+        ``level_of_detail``); None renders the meshes as they are.
+        ``source_meshes`` keeps the meshes as read, ``meshes`` what is rendered."""
         if not (0.0 < near_m < far_m):
             raise ValueError(f"need 0 < near_m < far_m, got near {near_m}, far {far_m}")
         self.model = model
@@ -51,8 +59,12 @@ class BatchedDepthRenderer:
         self.far_m = float(far_m)
         self.pixel_center_offset = float(pixel_center_offset)
         self.kinematics = BatchedKinematics.from_plant(model.plant)
-        self.meshes: RobotMeshes = extract_robot_meshes(model.plant, model.scene_graph,
-                                                        segments)
+        self.source_meshes: RobotMeshes = extract_robot_meshes(model.plant, model.scene_graph,
+                                                               segments)
+        self.meshes = self.source_meshes
+        if detail is not None:
+            self.meshes = level_of_detail(self.source_meshes, detail.tolerance_m(intrinsics),
+                                          detail.min_reduction)
         self._tables = render_tables(self.meshes, self.kinematics.num_bodies)
         k = intrinsics
         self._fx = float(k.fx)

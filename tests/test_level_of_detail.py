@@ -1,0 +1,71 @@
+"""The likelihood's level of detail of CAD meshes, against Drake's RenderEngineVtk on the
+full meshes, and the simplification's geometric tolerance."""
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.geometry import sphere_mesh
+from drake_tracker.core.level_of_detail import LevelOfDetail, simplify_mesh
+from drake_tracker.core.render_batched import BatchedDepthRenderer
+from drake_tracker.core.renderer import (
+    default_view_configuration,
+    make_renderer,
+    random_configurations,
+)
+from drake_tracker.hires_robot import SMALL_TESSELLATION, hires_apollo_model
+
+FULL = CameraIntrinsics.from_fov(640, 480, np.radians(45))
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    return hires_apollo_model(tmp_path_factory.mktemp("hires"), **SMALL_TESSELLATION)
+
+
+@pytest.mark.parametrize("stride", [8, 4], ids=["80x60", "160x120"])
+def test_level_of_detail_matches_drake_vtk_on_cad_meshes(model, stride):
+    intrinsics = FULL.subsampled(stride)
+    renderer = BatchedDepthRenderer(model, intrinsics)
+    # The level of detail must actually be coarser than the meshes it comes from.
+    assert renderer.source_meshes.num_triangles >= 10_000
+    assert renderer.num_triangles < 0.5 * renderer.source_meshes.num_triangles
+    q = random_configurations(model, 6, seed=21, center=default_view_configuration(model))
+    ours = renderer.render(q)
+    ref = make_renderer(model, intrinsics, "drake").render(q)
+    hit_ours, hit_ref = np.isfinite(ours), np.isfinite(ref)
+    either, both = hit_ours | hit_ref, hit_ours & hit_ref
+    assert both.sum() > 0.03 * ours.size  # the robot is in view
+    label_agreement = 1.0 - (hit_ours ^ hit_ref).sum() / either.sum()
+    diff = np.abs(ours[both].astype(float) - ref[both].astype(float))
+    assert label_agreement >= 0.99, label_agreement
+    assert np.median(diff) <= 0.002, np.median(diff)
+    assert np.percentile(diff, 95) <= 0.010, np.percentile(diff, 95)
+
+
+def test_simplified_sphere_stays_within_tolerance():
+    radius, tolerance = 0.06, 0.0015
+    vertices, triangles = sphere_mesh(radius, 96)
+    v, t = simplify_mesh(vertices, triangles, tolerance)
+    assert len(t) < 0.25 * len(triangles)
+    # Surface points: vertices, edge midpoints and centroids of the simplified triangles.
+    corners = v[t]
+    points = np.concatenate([v, corners.mean(axis=1),
+                             0.5 * (corners[:, 0] + corners[:, 1]),
+                             0.5 * (corners[:, 1] + corners[:, 2])])
+    # The tessellated input itself lies within ~0.1 mm of the sphere (96 segments).
+    error = np.abs(np.linalg.norm(points, axis=1) - radius)
+    assert error.max() <= tolerance + 2e-4, error.max()
+
+
+def test_primitive_robots_keep_their_meshes():
+    from drake_tracker.robot import build_tracker_model, robot_preset
+
+    apollo = build_tracker_model(robot_preset("apollo"))
+    renderer = BatchedDepthRenderer(apollo, FULL.subsampled(8))
+    assert renderer.num_triangles == renderer.source_meshes.num_triangles
+
+
+def test_bad_level_of_detail_is_rejected():
+    with pytest.raises(ValueError, match="tolerance_px"):
+        LevelOfDetail(tolerance_px=0.0)
