@@ -128,6 +128,11 @@ class TrackerParams:
     initial_positions_rad: dict[str, float] = field(default_factory=dict)
     #: The delay buffer keeps this much history (s); older images are rejected.
     buffer_horizon_s: float = 1.0
+    #: An image between two joint readings at most this far apart (s) is applied at the
+    #: nearer one, with the angles moved by the readings' interpolated motion (see
+    #: ``core/belief_buffer.py``); across a longer encoder gap the belief is predicted
+    #: to the image time with the angle process.
+    max_interpolation_gap_s: float = 0.05
 
 
 def load_tracker_params(path: str | Path | None = None) -> TrackerParams:
@@ -204,6 +209,9 @@ def validate_tracker_params(params: TrackerParams) -> None:
     im.likelihood.validate()
     _check(params.buffer_horizon_s > 0, "buffer_horizon_s", params.buffer_horizon_s,
            "must be > 0")
+    _check(math.isfinite(params.max_interpolation_gap_s)
+           and params.max_interpolation_gap_s >= 0, "max_interpolation_gap_s",
+           params.max_interpolation_gap_s, "must be finite and >= 0")
 
 
 def joint_noise_for(params: TrackerParams, joint_names: list[str]) -> list[JointNoise]:

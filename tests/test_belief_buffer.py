@@ -8,6 +8,7 @@ import pytest
 from drake_tracker.core.belief_buffer import BeliefBuffer, StaleReadingError
 from drake_tracker.core.kalman import (
     MEAN_A,
+    MEAN_B,
     VAR_A,
     JointKalmanBank,
     KalmanBankParams,
@@ -49,19 +50,29 @@ def _data(seed):
 
 
 def _in_time_order(times, readings, images):
-    """Reference without any buffer: one pass over readings and images sorted by stamp."""
+    """Reference without any buffer: one pass over readings and images in time order, each
+    image applied at the reading nearest to its stamp, to the angles moved by the readings'
+    linear interpolation to the image time (the buffer's anchor rule)."""
     bank = _bank()
     m = initial_moments(np.zeros(N), np.ones(N), np.full(N, 0.2), bank.params.has_bias)
-    events = [(t, 0, q) for t, q in zip(times, readings)] + [(t, 1, (y, r)) for t, y, r in images]
+    events = [(t, 0, 0.0, q) for t, q in zip(times, readings)]
+    for t, y, r in images:
+        k = int(np.searchsorted(times, t, side="right"))
+        t0, t1 = times[k - 1], times[k]
+        q_image = readings[k - 1] + (t - t0) / (t1 - t0) * (readings[k] - readings[k - 1])
+        anchor = k - 1 if t - t0 <= t1 - t else k
+        events.append((times[anchor], 1, t, (y, r, q_image - readings[anchor])))
     t_prev = 0.0
-    for t, kind, data in sorted(events, key=lambda e: (e[0], e[1])):
+    for t, kind, _, data in sorted(events, key=lambda e: (e[0], e[1], e[2])):
         if kind == 0:
             m = bank.step(m, t - t_prev, data)
+            t_prev = t
         else:
-            m = bank.predict(m, t - t_prev)
-            mean, var = _linear_image_update(*data)(m)
-            m = recombine_with_bias(m, mean, var)
-        t_prev = t
+            y, r, shift = data
+            prior = m.copy()
+            prior[MEAN_A] += shift
+            mean, var = _linear_image_update(y, r)(prior)
+            m = recombine_with_bias(m, mean - shift, var)
     return t_prev, m
 
 
@@ -128,3 +139,50 @@ def test_stale_and_bad_readings_raise():
         buf.add_reading(0.02, np.zeros(N + 1))
     with pytest.raises(ValueError, match="horizon"):
         BeliefBuffer(bank, np.zeros((5, N)), 0.0, horizon_s=0.0)
+
+
+def _bias_after_images(phase: float, num_images: int = 30) -> float:
+    """Issue 10's case: 1 kHz readings of a joint at angle 0 with a 0.15 rad bias, and
+    ideal images (angle 0, std 0.005 rad) at 10 Hz, ``phase`` encoder periods off the grid,
+    each arriving 20 ms late; default tracker parameters."""
+    from drake_tracker.params import TrackerParams, joint_noise_for, resolve_kalman_params
+
+    params = TrackerParams()
+    bank = JointKalmanBank(resolve_kalman_params(params, ["j"]))
+    noise = joint_noise_for(params, ["j"])[0]
+    bias, r = 0.15, 0.005**2
+    prior = initial_moments(np.array([bias]), np.array([noise.initial_angle_std_rad]),
+                            np.array([noise.initial_bias_std_rad]), np.array([True]))
+    buf = BeliefBuffer(bank, prior, 0.0, horizon_s=1.0)
+    k = 0
+    for image in range(num_images):
+        t_image = 0.1 * (image + 1) + phase * 1e-3
+        while (k + 1) * 1e-3 <= t_image + 0.02:
+            k += 1
+            buf.add_reading(k * 1e-3, np.array([bias]))
+        assert buf.add_image(t_image, _linear_image_update(np.zeros(1), np.full(1, r)))
+    return float(buf.present()[1][MEAN_B][0])
+
+
+def test_an_image_carries_the_same_bias_information_at_any_phase_between_readings():
+    on_grid = _bias_after_images(0.0)
+    assert on_grid == pytest.approx(0.15, rel=0.02)
+    for phase in (0.1, 0.5, 0.9):
+        assert _bias_after_images(phase) == pytest.approx(on_grid, rel=0.02), phase
+
+
+def test_image_anchor_interpolates_the_readings_and_falls_back_across_a_gap():
+    bank = _bank()
+    buf = BeliefBuffer(bank, initial_moments(np.zeros(N), np.ones(N), np.ones(N),
+                                             bank.params.has_bias), 0.0, horizon_s=1.0,
+                       max_interpolation_gap_s=0.05)
+    buf.add_reading(0.010, np.full(N, 1.0))
+    buf.add_reading(0.012, np.full(N, 2.0))
+    anchor = buf.image_anchor(0.0115)  # nearer the second reading
+    assert anchor.anchor_time_s == 0.012
+    np.testing.assert_allclose(anchor.angle_shift, -0.25)
+    np.testing.assert_allclose(anchor.prior[MEAN_A], buf.belief_at(0.012)[MEAN_A] - 0.25)
+    buf.add_reading(0.200, np.full(N, 3.0))  # an encoder gap of 188 ms
+    gap = buf.image_anchor(0.1)
+    assert gap.anchor_time_s == 0.1 and not np.any(gap.angle_shift)
+    assert np.all(gap.prior[VAR_A] > buf.belief_at(0.012)[VAR_A])

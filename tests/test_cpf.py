@@ -1,9 +1,17 @@
 """The Coordinate Particle Filter against a brute-force grid posterior."""
 
 import numpy as np
+import pytest
 
-from drake_tracker.core.cpf import coordinate_particle_filter, kl_from_uniform
+from drake_tracker.core.belief_buffer import AngleObservation
+from drake_tracker.core.cpf import (
+    annealed_coordinate_particle_filter,
+    coordinate_particle_filter,
+    kl_from_uniform,
+)
+from drake_tracker.core.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
 from drake_tracker.core.likelihood import LikelihoodParams, log_likelihoods, prepare_observation
+from drake_tracker.params import TrackerParams
 
 PARAMS = LikelihoodParams(
     depth_noise_std_m=0.05, depth_noise_factor_per_m=0.0, occlusion_probability=0.2
@@ -85,3 +93,95 @@ def test_kl_from_uniform():
     lw = np.full(10, -np.inf)
     lw[3] = 0.0
     assert np.isclose(kl_from_uniform(lw), np.log(10))
+
+
+DEFAULT_BETAS = tuple(TrackerParams().image.annealing_betas)
+
+
+def _gaussian_case_2d():
+    """A correlated Gaussian likelihood on two coordinates with an independent prior: the
+    exact posterior is Gaussian, with precision prior + likelihood."""
+    mu, sd = np.array([0.2, -0.1]), np.array([0.3, 0.5])
+    y = np.array([0.1, 0.05])
+    lam = np.array([[400.0, 300.0], [300.0, 400.0]])
+
+    def loglik(q):
+        d = q - y
+        return -0.5 * np.einsum("ni,ij,nj->n", d, lam, d)
+
+    precision = np.diag(1 / sd**2) + lam
+    cov = np.linalg.inv(precision)
+    return loglik, mu, sd, cov @ (mu / sd**2 + lam @ y), np.diag(cov)
+
+
+def _gaussian_case_1d():
+    def loglik(q):
+        return -0.5 * (q[:, 0] - 1.0) ** 2 / 0.25
+
+    # prior N(0, 1), likelihood N(1, 0.25): posterior mean 0.8, variance 0.2.
+    return loglik, np.zeros(1), np.ones(1), np.array([0.8]), np.array([0.2])
+
+
+@pytest.mark.parametrize("case", [_gaussian_case_1d, _gaussian_case_2d])
+@pytest.mark.parametrize("betas", [DEFAULT_BETAS, (1.0,)])
+def test_annealed_and_single_sweeps_match_the_exact_gaussian_posterior(case, betas):
+    loglik, mu, sd, mean_ref, var_ref = case()
+    blocks = [np.array([i]) for i in range(len(mu))]
+    means, variances = [], []
+    for seed in range(40):
+        r = annealed_coordinate_particle_filter(mu, sd, blocks, 400, loglik,
+                                                np.random.default_rng([seed, 7]), 2.0, betas)
+        means.append(r.mean)
+        variances.append(r.variance)
+    means, variances = np.array(means), np.array(variances)
+    se_mean = means.std(axis=0, ddof=1) / np.sqrt(len(means))
+    se_var = variances.std(axis=0, ddof=1) / np.sqrt(len(variances))
+    assert np.all(np.abs(means.mean(0) - mean_ref) < 4 * se_mean + 0.01 * np.sqrt(var_ref)), (
+        means.mean(0), mean_ref)
+    # A weighted variance from an effective sample of a few hundred is biased low by ~1/ESS.
+    assert np.all(np.abs(variances.mean(0) - var_ref) < 4 * se_var + 0.03 * var_ref), (
+        variances.mean(0), var_ref)
+
+
+def test_the_default_schedule_does_not_count_the_image_more_than_once():
+    """Regression: sweeps that each weighted likelihood^beta_k on top of the previous
+    sweep's result gave the posterior of likelihood^sum(betas) (variance 0.43, not 0.5)."""
+    def loglik(q):
+        return -0.5 * (q[:, 0] - 1.0) ** 2
+
+    variances = [annealed_coordinate_particle_filter(
+        np.zeros(1), np.ones(1), [np.array([0])], 400, loglik, np.random.default_rng(s), 2.0,
+        DEFAULT_BETAS).variance[0] for s in range(40)]
+    overconfident = 1 / (1 + sum(DEFAULT_BETAS))
+    assert abs(np.mean(variances) - 0.5) < abs(np.mean(variances) - overconfident) / 4
+
+
+def test_cpf_image_update_with_a_correlated_angle_bias_prior_is_the_kalman_update():
+    """One joint with a correlated (angle, bias) prior and a Gaussian image likelihood on
+    the angle: the CPF's marginals, turned into a pseudo-observation and recombined with
+    p(b | a) (eq. 16), give the exact Kalman posterior of (angle, bias)."""
+    prior = np.zeros((5, 1))
+    prior[MEAN_A], prior[MEAN_B] = 0.3, 0.1
+    prior[VAR_A], prior[COV_AB], prior[VAR_B] = 0.04, -0.015, 0.01
+    y, r = 0.2, 0.01**2
+
+    def loglik(q):
+        return -0.5 * (q[:, 0] - y) ** 2 / r
+
+    H = np.array([[1.0, 0.0]])
+    P = np.array([[0.04, -0.015], [-0.015, 0.01]])
+    K = P @ H.T / (H @ P @ H.T + r)
+    mean_ref = np.array([0.3, 0.1]) + (K * (y - 0.3)).ravel()
+    cov_ref = (np.eye(2) - K @ H) @ P
+    results = []
+    for seed in range(30):
+        cpf = annealed_coordinate_particle_filter(
+            prior[MEAN_A], np.sqrt(prior[VAR_A]), [np.array([0])], 400, loglik,
+            np.random.default_rng(seed), 2.0, DEFAULT_BETAS)
+        post = AngleObservation.from_posterior(prior, cpf.mean, cpf.variance).apply(prior)
+        results.append([post[MEAN_A, 0], post[MEAN_B, 0], post[VAR_A, 0], post[COV_AB, 0],
+                        post[VAR_B, 0]])
+    got = np.mean(results, axis=0)
+    np.testing.assert_allclose(got[:2], mean_ref, atol=3e-4)
+    np.testing.assert_allclose(got[2:], [cov_ref[0, 0], cov_ref[0, 1], cov_ref[1, 1]],
+                               rtol=0.05)

@@ -71,7 +71,8 @@ def mismatch(a: np.ndarray, b: np.ndarray, tol_m: float = 0.01) -> float:
 @pytest.fixture(scope="module")
 def offset_run():
     """A noise-free run without environment, a large camera offset, a long delay."""
-    s = small(noise_sigma0_m=0.0, noise_k_per_m=0.0, dropout_probability=0.0, delay_s=0.1)
+    s = small(noise_sigma0_m=0.0, noise_k_per_m=0.0, dropout_probability=0.0, delay_s=0.1,
+              clock="encoder-grid")
     s.environment = False
     s.camera.offset = [0.06, -0.05, 0.04, 0.06, -0.05, 0.04]
     s.camera.offset_gain_per_rad = {"head_tilt": [0.0, 0.0, 0.02, 0.03, 0.0, 0.0]}
@@ -111,8 +112,9 @@ def test_images_show_the_true_camera_pose_at_capture_time(offset_run):
 def test_images_arrive_late_with_their_capture_times(offset_run):
     s, run = offset_run
     n = len(run.image_capture_times_s)
-    np.testing.assert_allclose(run.image_capture_times_s, np.arange(n) / s.camera.rate_hz,
-                               atol=1e-12)
+    h = 1.0 / s.encoders.rate_hz  # encoder-grid clock: the nearest encoder tick
+    np.testing.assert_allclose(run.image_capture_times_s,
+                               np.round(np.arange(n) / s.camera.rate_hz / h) * h, atol=1e-12)
     np.testing.assert_allclose(run.image_arrival_times_s - run.image_capture_times_s, 0.1,
                                atol=1e-12)
     # Everything that arrived by 0.6 s (+ the final half step) and nothing later.
@@ -121,7 +123,7 @@ def test_images_arrive_late_with_their_capture_times(offset_run):
 
 
 def test_depth_frame_port_changes_only_at_arrival():
-    s = small(delay_s=0.05)
+    s = small(delay_s=0.05, clock="encoder-grid")  # 100 Hz encoders: captures 0, 0.03, ...
     diagram, _ = build_simulated_world(s)
     sim = Simulator(diagram)
     ctx = sim.get_mutable_context()
@@ -132,12 +134,40 @@ def test_depth_frame_port_changes_only_at_arrival():
     first = port.Eval(ctx)
     assert (first.sequence, first.capture_time_s, first.arrival_time_s) == (0, 0.0, 0.05)
     assert first.depth_m.shape == (120, 160) and first.depth_m.dtype == np.float32
-    sim.AdvanceTo(0.05 + 1 / 30 - 0.002)
+    sim.AdvanceTo(0.05 + 0.03 - 0.002)
     assert port.Eval(ctx).sequence == 0
-    sim.AdvanceTo(0.05 + 1 / 30 + 0.002)
+    sim.AdvanceTo(0.05 + 0.03 + 0.002)
     second = port.Eval(ctx)
     assert second.sequence == 1
-    assert second.capture_time_s == pytest.approx(1 / 30)
+    assert second.capture_time_s == pytest.approx(0.03)
+
+
+def test_free_running_camera_clock_falls_between_encoder_readings():
+    """The default camera runs on its own clock: a random phase, 1/30 s periods with 1 ms
+    of Gaussian jitter, each frame stamped with its capture time and arriving delay_s
+    later; encoders keep their own 1 kHz grid."""
+    s = load_scenario("s-full-arm/constant")
+    assert s.camera.clock == "free-running" and s.camera.jitter_std_s == 0.001
+    from drake_tracker.sim.depth_camera import capture_schedule
+
+    h = 1.0 / s.encoders.rate_hz
+    offsets, cycle = capture_schedule(s.camera, seed=3, encoder_period_s=h)
+    phase_on_grid = np.abs(offsets / h - np.round(offsets / h)) * h
+    # Off the encoder grid: the distance to the nearest tick is uniform in [0, h/2].
+    assert np.mean(phase_on_grid > 1e-5) > 0.95
+    assert 0.2 * h < np.mean(phase_on_grid) < 0.3 * h
+    gaps = np.diff(offsets)
+    assert abs(np.mean(gaps) - 1 / 30) < 2e-4
+    assert 0.0011 < np.std(gaps) < 0.0017  # two independent 1 ms jitters: sqrt(2) ms
+    other, _ = capture_schedule(s.camera, seed=4, encoder_period_s=h)
+    assert abs(other[0] - offsets[0]) > 1e-6  # the phase depends on the seed
+    small_s = small(delay_s=0.04)
+    run = simulate_and_record(small_s, duration_s=0.5, image_stride=8)
+    captures = run.image_capture_times_s
+    grid = 1.0 / small_s.encoders.rate_hz
+    assert np.all(np.abs(captures / grid - np.round(captures / grid)) > 1e-6)
+    np.testing.assert_allclose(run.image_arrival_times_s - captures, 0.04, atol=1e-9)
+    assert np.all(np.diff(captures) > 0.02) and len(captures) >= 13
 
 
 def test_depth_noise_and_dropout_statistics():
@@ -199,6 +229,7 @@ def test_second_robot_simulates_and_encoders_only_is_exact_without_errors():
     s.camera.offset = [0.0] * 6
     s.encoders.rate_hz = 100.0
     s.encoders.noise_sigma_deg = 0.0
+    s.camera.clock = "encoder-grid"
     run = simulate_and_record(s, duration_s=0.5, image_stride=1)
     assert run.joint_names == ["shoulder_pan", "shoulder_lift", "elbow", "wrist_1",
                                "wrist_2", "wrist_3"]
@@ -213,7 +244,7 @@ def test_second_robot_simulates_and_encoders_only_is_exact_without_errors():
 
 
 def test_dynamic_mode_tracks_the_trajectory():
-    s = small()
+    s = small(clock="encoder-grid")
     s.mode = "dynamic"
     s.time_step_s = 0.002
     run = simulate_and_record(s, duration_s=0.3, image_stride=8)

@@ -92,13 +92,13 @@ def test_delay_buffer_system_reports_why_an_image_has_no_prior(apollo):
     frame = DepthFrame(0.0, 0.05, np.ones((60, 80), np.float32), 0)
     system.GetInputPort("depth_frame").FixValue(context, frame)
     prior = system.GetOutputPort("image_prior").Eval(context)
-    assert prior.belief is None and "no joint reading" in prior.problem
+    assert prior.anchor is None and "no joint reading" in prior.problem
     system.GetInputPort("measured_position").FixValue(
         context, np.zeros(len(apollo.robot_joint_names)))
     system.GetInputPort("measurement_time").FixValue(context, [0.0])
     Simulator(system, context).AdvanceTo(0.005)
     prior = system.GetOutputPort("image_prior").Eval(context)
-    assert prior.belief is not None and prior.belief.shape == (5, apollo.num_joints)
+    assert prior.anchor is not None and prior.anchor.prior.shape == (5, apollo.num_joints)
     system.GetInputPort("depth_frame").FixValue(
         context, DepthFrame(1.0, 1.0, np.ones((60, 80), np.float32), 1))
     assert "future" in system.GetOutputPort("image_prior").Eval(context).problem
@@ -174,6 +174,7 @@ def test_diagram_context_can_be_copied_and_resimulated(apollo):
 def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, caplog):
     import logging
 
+    from drake_tracker.core.belief_buffer import ImageAnchor
     from drake_tracker.core.renderer import default_view_configuration
     from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
     from drake_tracker.systems.messages import ImagePrior
@@ -187,7 +188,8 @@ def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, capl
     _, belief = make_bank_and_prior(apollo, p, default_view_configuration(apollo)[
         [apollo.joint_names.index(n) for n in apollo.robot_joint_names]])
     system.GetInputPort("depth_frame").FixValue(context, frame)
-    system.GetInputPort("image_prior").FixValue(context, ImagePrior(0, 0.0, belief, ""))
+    anchor = ImageAnchor(0.0, 0.0, belief, np.zeros(apollo.num_joints))
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(0, 0.0, anchor, ""))
     simulator = Simulator(system, context)
     simulator.AdvanceTo(0.015)
     message = system.GetOutputPort("image_observation").Eval(context)
@@ -198,7 +200,7 @@ def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, capl
     # A malformed image is skipped with a warning, not raised inside the simulation.
     bad = DepthFrame(0.03, 0.06, np.ones((10, 10), np.float32), 1)
     system.GetInputPort("depth_frame").FixValue(context, bad)
-    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.03, belief, ""))
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.03, anchor, ""))
     with caplog.at_level(logging.WARNING):
         simulator.AdvanceTo(0.055)
     assert "image 1 skipped" in caplog.text

@@ -2,7 +2,15 @@
 samples it at the camera rate, corrupts the image like a structured-light sensor and
 delivers it late.
 
-Per captured image ``k`` (capture time ``t_k = k / rate_hz``):
+The camera runs on its own clock (``camera.clock: free-running``): image ``k`` is
+captured at ``t_k = phase + k / rate_hz + jitter_k``, with a random phase in one frame
+period and Gaussian jitter (``jitter_std_s``), so frames fall between encoder readings,
+as a real camera's do. ``encoder-grid`` moves every capture to the nearest encoder tick
+instead. Python systems cannot schedule their own next update, so the schedule is drawn
+once for a cycle of about ``SCHEDULE_CYCLE_S`` and repeats (one periodic event per frame
+slot of the cycle, and one per arrival).
+
+Per captured image ``k``:
 
 * pixels where nothing was hit (too far) or closer than the near plane become NaN;
 * silhouettes: a pixel whose 4-neighbour depth differs by more than
@@ -43,6 +51,29 @@ from drake_tracker.sim.scenario import CameraConfig
 RENDERER_NAME = "sim_vtk"
 #: Random stream of the camera (the encoders use stream 0).
 CAMERA_STREAM = 7
+#: Random stream of the camera's clock (phase and jitter).
+CLOCK_STREAM = 8
+#: The capture schedule (phase and per-frame jitter) repeats after about this long (s).
+SCHEDULE_CYCLE_S = 10.0
+#: Event times that differ by less than this are the same instant (s).
+TIME_TOLERANCE_S = 1e-7
+
+
+def capture_schedule(config: CameraConfig, seed: int, encoder_period_s: float
+                     ) -> tuple[np.ndarray, float]:
+    """(capture offsets within one cycle, increasing, in [0, cycle); the cycle length)."""
+    period = 1.0 / config.rate_hz
+    slots = max(1, int(round(SCHEDULE_CYCLE_S / period)))
+    nominal = np.arange(slots) * period
+    if config.clock == "encoder-grid":
+        h = float(encoder_period_s)
+        cycle = max(1, round(slots * period / h)) * h
+        return np.unique(np.round(nominal / h) * h % cycle), cycle
+    cycle = slots * period
+    rng = counter_generator(seed, 0, CLOCK_STREAM)
+    phase = rng.uniform(0.0, period)
+    jitter = np.clip(rng.normal(0.0, config.jitter_std_s, slots), -0.4 * period, 0.4 * period)
+    return np.sort((phase + nominal + jitter) % cycle), cycle
 
 
 def camera_intrinsics(config: CameraConfig) -> CameraIntrinsics:
@@ -114,22 +145,22 @@ class DepthCameraSystem(LeafSystem):
         - depth_frame
 
     ``depth_image_32f`` is the noise-free render (``ImageDepth32F``, e.g. RgbdSensor's
-    ``depth_image_32f``); it is evaluated only at capture ticks ``k / rate_hz``.
+    ``depth_image_32f``); it is evaluated only at capture instants (``capture_schedule``).
     ``depth_frame`` is the latest image that has *arrived* (``capture + delay_s``) as a
     :class:`DepthFrame` (full resolution, float32 m, NaN = invalid), and
     ``DepthFrame.empty()`` before the first arrival; it changes only at arrivals.
 
     Abstract state: the frames in flight (captured, not yet arrived), oldest first, and
-    the latest arrived frame. One periodic unrestricted update handles both the capture
-    ticks (offset 0) and the arrival ticks (offset ``delay_s`` modulo the period).
+    the latest arrived frame. One handler serves the capture and the arrival events.
     """
 
-    def __init__(self, config: CameraConfig, seed: int = 0):
+    def __init__(self, config: CameraConfig, seed: int = 0, encoder_period_s: float = 1e-3):
         super().__init__()
         self._config = config
         self._seed = int(seed)
         self._period = 1.0 / config.rate_hz
         self._delay = float(config.delay_s)
+        self._offsets, self._cycle = capture_schedule(config, seed, encoder_period_s)
         self._intrinsics = camera_intrinsics(config)
         self.DeclareAbstractInputPort("depth_image_32f", AbstractValue.Make(ImageDepth32F()))
         self._pending = self.DeclareAbstractState(AbstractValue.Make(()))
@@ -137,10 +168,13 @@ class DepthCameraSystem(LeafSystem):
         self.DeclareAbstractOutputPort(
             "depth_frame", lambda: AbstractValue.Make(DepthFrame.empty()), self._calc_frame,
             {self.abstract_state_ticket(self._latest)})
-        self.DeclarePeriodicUnrestrictedUpdateEvent(self._period, 0.0, self._on_tick)
-        arrival_offset = self._delay - np.floor(self._delay / self._period) * self._period
-        if arrival_offset > 1e-9 and self._period - arrival_offset > 1e-9:
-            self.DeclarePeriodicUnrestrictedUpdateEvent(self._period, arrival_offset,
+        arrivals = (self._offsets + self._delay) % self._cycle
+        event_offsets = np.sort(np.concatenate([self._offsets, arrivals]))
+        distinct = np.concatenate([[True], np.diff(event_offsets) > TIME_TOLERANCE_S])
+        if event_offsets[-1] > self._cycle - TIME_TOLERANCE_S and event_offsets[0] < 1e-12:
+            distinct[-1] = False  # the same instant as offset 0 of the next cycle
+        for offset in event_offsets[distinct]:
+            self.DeclarePeriodicUnrestrictedUpdateEvent(self._cycle, float(offset),
                                                         self._on_tick)
 
     @property
@@ -153,8 +187,13 @@ class DepthCameraSystem(LeafSystem):
         return self._period
 
     def _capture_index(self, t: float) -> int | None:
-        k = int(round(t / self._period))
-        return k if abs(t - k * self._period) < 1e-9 else None
+        """The frame captured at ``t``, or None when ``t`` is not a capture instant."""
+        cycle = int(np.floor((t + TIME_TOLERANCE_S) / self._cycle))
+        within = t - cycle * self._cycle
+        slot = int(np.argmin(np.abs(self._offsets - within)))
+        if abs(self._offsets[slot] - within) > TIME_TOLERANCE_S:
+            return None
+        return cycle * len(self._offsets) + slot
 
     def _on_tick(self, context, state):
         t = context.get_time()
@@ -165,8 +204,7 @@ class DepthCameraSystem(LeafSystem):
             image = self.get_input_port(0).Eval(context)
             clean = np.asarray(image.data)[:, :, 0]
             depth = corrupt_depth(clean, self._config, self._seed, k)
-            capture = k * self._period
-            pending.append(DepthFrame(capture, capture + self._delay, depth, k))
+            pending.append(DepthFrame(t, t + self._delay, depth, k))
         while pending and pending[0].arrival_time_s <= t + 1e-9:
             latest = pending.pop(0)
         state.get_mutable_abstract_state(self._pending).set_value(tuple(pending))
@@ -177,8 +215,8 @@ class DepthCameraSystem(LeafSystem):
 
 
 def AddDepthCamera(builder: DiagramBuilder, scene_graph: SceneGraph, parent_frame_id,
-                   config: CameraConfig, seed: int = 0, name: str = "depth_camera"
-                   ) -> tuple[RgbdSensor, DepthCameraSystem]:
+                   config: CameraConfig, seed: int = 0, name: str = "depth_camera",
+                   encoder_period_s: float = 1e-3) -> tuple[RgbdSensor, DepthCameraSystem]:
     """Adds an RgbdSensor rigidly attached at the origin of the geometry frame
     ``parent_frame_id`` (Drake camera axes: +z forward, +x right, +y down) and the
     :class:`DepthCameraSystem` that samples, corrupts and delays its depth images."""
@@ -187,6 +225,6 @@ def AddDepthCamera(builder: DiagramBuilder, scene_graph: SceneGraph, parent_fram
         f"{name}_rgbd", RgbdSensor(parent_frame_id, RigidTransform(),
                                    depth_render_camera(config)))
     builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
-    camera = builder.AddNamedSystem(name, DepthCameraSystem(config, seed))
+    camera = builder.AddNamedSystem(name, DepthCameraSystem(config, seed, encoder_period_s))
     builder.Connect(sensor.depth_image_32F_output_port(), camera.get_input_port(0))
     return sensor, camera

@@ -28,6 +28,7 @@ from drake_tracker.robot import ROBOT_PRESETS, RobotConfig, robot_preset
 
 MODES = ("kinematic", "dynamic")
 TRAJECTORY_KINDS = ("sinusoid", "free", "in-out-in", "static")
+CAMERA_CLOCKS = ("free-running", "encoder-grid")
 BIAS_KINDS = ("none", "constant", "steps", "random-walk")
 BIAS_VARIANTS = ("none", "constant", "time-varying")
 
@@ -117,6 +118,13 @@ class CameraConfig:
     rate_hz: float = 30.0
     near_m: float = 0.1
     far_m: float = 6.0
+    #: ``free-running``: the camera's own clock (period 1/rate_hz from a random phase,
+    #: plus per-frame Gaussian jitter), so frames fall between encoder readings, as real
+    #: cameras' do. ``encoder-grid``: every capture is moved to the nearest encoder tick
+    #: (to compare with the free-running camera on the same run).
+    clock: str = "free-running"
+    #: Standard deviation of each capture instant about the camera's period grid (s).
+    jitter_std_s: float = 0.001
     #: Transport delay between capture and arrival (s).
     delay_s: float = 0.05
     #: Depth noise sigma(z) = noise_sigma0_m + noise_k_per_m * z^2 (m).
@@ -381,6 +389,11 @@ def validate_scenario(scenario: Scenario, check_model: bool = True) -> None:
     if c.far_m <= c.near_m:
         raise ValueError(f"camera.far_m ({c.far_m}) must exceed camera.near_m ({c.near_m})")
     _non_negative(c.delay_s, "camera.delay_s")
+    _one_of(c.clock, CAMERA_CLOCKS, "camera.clock")
+    _non_negative(c.jitter_std_s, "camera.jitter_std_s")
+    if c.jitter_std_s > 0.1 / c.rate_hz:
+        raise ValueError(f"camera.jitter_std_s = {c.jitter_std_s} s is more than a tenth of "
+                         f"the frame period 1/camera.rate_hz")
     _non_negative(c.noise_sigma0_m, "camera.noise_sigma0_m")
     _non_negative(c.noise_k_per_m, "camera.noise_k_per_m")
     if not 0 <= c.dropout_probability < 1:

@@ -426,7 +426,8 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
     camera_body = plant.GetBodyByName(camera_frame.body().name())
     _, camera = AddDepthCamera(builder, scene_graph,
                                plant.GetBodyFrameIdOrThrow(camera_body.index()),
-                               scenario.camera, scenario.seed, name=f"{name}_depth_camera")
+                               scenario.camera, scenario.seed, name=f"{name}_depth_camera",
+                               encoder_period_s=1.0 / scenario.encoders.rate_hz)
 
     ports = {
         "true_position": truth.GetOutputPort("true_position"),

@@ -22,7 +22,7 @@ class CpfState:
     """The system's abstract state."""
 
     last_sequence: int = -1
-    last_image_time_s: float = float("-inf")
+    next_image_due_s: float = float("-inf")
     message: ImageObservationMessage = field(default_factory=ImageObservationMessage)
     images_applied: int = 0
     images_skipped: int = 0
@@ -68,24 +68,28 @@ class CpfImageUpdateSystem(LeafSystem):
         frame: DepthFrame = self.get_input_port(0).Eval(context)
         if frame.is_empty or frame.sequence <= s.last_sequence:
             return
+        if s.last_sequence >= 0:  # frames that came and went between two checks
+            s.images_skipped += frame.sequence - s.last_sequence - 1
         s.last_sequence = frame.sequence
-        if self.processor.wants(frame, s.last_image_time_s):
+        if self.processor.wants(frame, s.next_image_due_s):
             prior: ImagePrior = self.get_input_port(1).Eval(context)
-            if prior.belief is None or prior.sequence != frame.sequence:
+            if prior.anchor is None or prior.sequence != frame.sequence:
                 log.warning("image %d skipped: %s", frame.sequence, prior.problem)
                 s.images_skipped += 1
             else:
                 try:
-                    observation, _ = self.processor.observe(frame, prior.belief)
+                    observation, _ = self.processor.observe(frame, prior.anchor.prior)
                 except ValueError as err:
                     log.warning("image %d skipped: %s", frame.sequence, err)
                     observation = None
-                s.last_image_time_s = prior.image_time_s
+                s.next_image_due_s = self.processor.next_due(prior.image_time_s,
+                                                             s.next_image_due_s)
                 if observation is None:
                     s.images_skipped += 1
                 else:
                     s.message = ImageObservationMessage(
-                        s.message.id + 1, frame.sequence, prior.image_time_s, observation)
+                        s.message.id + 1, frame.sequence, prior.image_time_s, observation,
+                        prior.anchor)
                     s.images_applied += 1
         else:
             s.images_skipped += 1

@@ -112,12 +112,12 @@ class DelayBufferSystem(LeafSystem):
         message = self.get_input_port(2).Eval(context)
         if message.id > s.last_observation_id and message.observation is not None:
             s.last_observation_id = message.id
-            problem = s.buffer.image_time_problem(message.image_time_s) if s.buffer else \
-                "no joint reading yet"
+            problem = s.buffer.image_time_problem(message.anchor.anchor_time_s) \
+                if s.buffer else "no joint reading yet"
             if problem is not None:
                 log.warning("image %d skipped: %s", message.sequence, problem)
             else:
-                s.buffer.add_observation(message.image_time_s, message.observation)
+                s.buffer.add_image_observation(message.anchor, message.observation)
                 now, belief = s.buffer.present()
                 s.correction = BeliefCorrection(s.correction.id + 1, now,
                                                 s.last_reading_time_s, belief)
@@ -137,5 +137,5 @@ class DelayBufferSystem(LeafSystem):
             output.set_value(ImagePrior(frame.sequence, t, None, "no joint reading yet"))
             return
         problem = s.buffer.image_time_problem(t)
-        belief = None if problem else s.buffer.belief_at(t)
-        output.set_value(ImagePrior(frame.sequence, t, belief, problem or ""))
+        anchor = None if problem else s.buffer.image_anchor(t)
+        output.set_value(ImagePrior(frame.sequence, t, anchor, problem or ""))

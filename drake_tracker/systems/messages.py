@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import AngleObservation
+from drake_tracker.core.belief_buffer import AngleObservation, ImageAnchor
 
 
 @dataclass
@@ -26,19 +26,22 @@ class BeliefCorrection:
 
 @dataclass
 class ImagePrior:
-    """The belief at the time of the image on the depth port, or why there is none."""
+    """Where the image on the depth port enters the buffer, with the angles' prior at its
+    time (``anchor``), or why it cannot (``problem``)."""
 
     sequence: int = -1
     image_time_s: float = float("nan")
-    belief: np.ndarray | None = None
+    anchor: ImageAnchor | None = None
     problem: str = "no image"
 
 
 @dataclass
 class ImageObservationMessage:
-    """An image's pseudo-observation of the joint angles, stamped with the image time."""
+    """An image's pseudo-observation of the joint angles at its time, relative to
+    ``anchor.prior``."""
 
     id: int = 0
     sequence: int = -1
     image_time_s: float = float("nan")
     observation: AngleObservation | None = None
+    anchor: ImageAnchor | None = None
