@@ -19,7 +19,7 @@ from drake_tracker.core.frames import DepthFrame
 from drake_tracker.metrics import format_report_table, method_report
 from drake_tracker.params import TrackerParams, load_tracker_params
 from drake_tracker.recording import RecordedRun
-from drake_tracker.robot import RobotConfig, build_tracker_model
+from drake_tracker.robot import RobotConfig, build_tracker_model, load_robot_config
 from drake_tracker.tracker import PoseReadout, Tracker, full_reading
 
 
@@ -41,14 +41,7 @@ class ReplayResult:
 
 def robot_config_from_yaml(text: str) -> RobotConfig:
     """The RobotConfig stored in a recorded run."""
-    from pydrake.common.yaml import yaml_load
-
-    data = yaml_load(data=text) or {}
-    known = {"model_file", "camera_frame", "end_effector_frame"}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ValueError(f"robot config: unknown fields {unknown}")
-    return RobotConfig(**data)
+    return load_robot_config(text)
 
 
 def model_for_run(run: RecordedRun):
