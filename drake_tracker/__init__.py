@@ -4,6 +4,50 @@ Implements Garcia Cifuentes et al., "Probabilistic Articulated Real-Time Trackin
 for Robot Manipulation" (RA-L 2017): a per-joint Kalman bank on (angle, bias), a
 Coordinate Particle Filter depth-image update, six virtual camera joints, and a
 delay buffer for late images.
+
+The public API (imported lazily, so ``import drake_tracker`` stays cheap)::
+
+    from drake_tracker import AddTracker, RobotConfig, TrackerParams, build_tracker_model
 """
 
+import importlib
+
 __version__ = "0.1.0"
+
+#: Public name -> module that defines it.
+_PUBLIC = {
+    "AddTracker": "drake_tracker.systems.add_tracker",
+    "TrackerSystems": "drake_tracker.systems.add_tracker",
+    "JointKalmanBankSystem": "drake_tracker.systems.kalman_bank_system",
+    "DelayBufferSystem": "drake_tracker.systems.delay_buffer_system",
+    "CpfImageUpdateSystem": "drake_tracker.systems.cpf_system",
+    "DepthImageToFrame": "drake_tracker.systems.depth_image_adapter",
+    "ImageStamper": "drake_tracker.systems.depth_image_adapter",
+    "AddImageStamper": "drake_tracker.systems.depth_image_adapter",
+    "Tracker": "drake_tracker.tracker",
+    "TrackerParams": "drake_tracker.params",
+    "load_tracker_params": "drake_tracker.params",
+    "RobotConfig": "drake_tracker.robot",
+    "FrameOffset": "drake_tracker.robot",
+    "TrackerModel": "drake_tracker.robot",
+    "build_tracker_model": "drake_tracker.robot",
+    "load_robot_config": "drake_tracker.robot",
+    "default_home_positions": "drake_tracker.robot",
+    "CameraIntrinsics": "drake_tracker.core.camera",
+    "DepthFrame": "drake_tracker.core.frames",
+}
+
+__all__ = ["__version__", *_PUBLIC]
+
+
+def __getattr__(name: str):
+    """Imports a public name from its module on first use."""
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'drake_tracker' has no attribute '{name}'")
+    value = getattr(importlib.import_module(_PUBLIC[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_PUBLIC))

@@ -1,4 +1,5 @@
-"""Pinhole intrinsics of the depth camera and plain image subsampling (SPEC §4)."""
+"""Pinhole intrinsics of the depth camera (from Drake's CameraInfo or given) and plain
+image subsampling."""
 
 from __future__ import annotations
 
@@ -46,6 +47,7 @@ class CameraIntrinsics:
                                 info.center_x(), info.center_y())
 
     def to_camera_info(self):
+        """The same intrinsics as a ``pydrake.systems.sensors.CameraInfo``."""
         from pydrake.systems.sensors import CameraInfo
 
         return CameraInfo(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
@@ -70,12 +72,30 @@ class CameraIntrinsics:
         )
 
     def as_array(self) -> np.ndarray:
+        """[width, height, fx, fy, cx, cy] as floats (for storage)."""
         return np.array([self.width, self.height, self.fx, self.fy, self.cx, self.cy], float)
 
     @staticmethod
     def from_array(a: np.ndarray) -> CameraIntrinsics:
+        """The inverse of ``as_array``."""
         w, h, fx, fy, cx, cy = (float(x) for x in a)
         return CameraIntrinsics(int(w), int(h), fx, fy, cx, cy)
+
+
+def as_intrinsics(camera) -> CameraIntrinsics:
+    """CameraIntrinsics from Drake's ``CameraInfo``, a ``DepthRenderCamera`` or
+    ``RenderCameraCore`` (e.g. ``sensor.default_depth_render_camera()``), or a
+    CameraIntrinsics (returned as it is)."""
+    if isinstance(camera, CameraIntrinsics):
+        return camera
+    if hasattr(camera, "core"):  # DepthRenderCamera / ColorRenderCamera
+        camera = camera.core()
+    if hasattr(camera, "intrinsics"):  # RenderCameraCore
+        camera = camera.intrinsics()
+    if all(hasattr(camera, name) for name in ("focal_x", "center_x", "width")):
+        return CameraIntrinsics.from_camera_info(camera)
+    raise TypeError(f"camera model: expected CameraInfo, DepthRenderCamera or "
+                    f"CameraIntrinsics, got {type(camera).__name__}")
 
 
 def subsample(image: np.ndarray, stride: int) -> np.ndarray:

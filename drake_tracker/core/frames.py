@@ -1,4 +1,5 @@
-"""Time-stamped measurements passed between the simulated world, the tracker and its ports."""
+"""Time-stamped depth images as the tracker reads them, and the conversion from Drake's
+depth pixel encodings."""
 
 from __future__ import annotations
 
@@ -23,8 +24,37 @@ class DepthFrame:
 
     @staticmethod
     def empty() -> DepthFrame:
+        """The placeholder before the first image (``sequence`` -1)."""
         return DepthFrame(float("nan"), float("nan"), np.zeros((0, 0), np.float32), -1)
 
     @property
     def is_empty(self) -> bool:
+        """Whether this is the placeholder, not an image."""
         return self.sequence < 0
+
+
+#: Depth pixel encodings the tracker reads: Drake's ``ImageDepth32F`` (metres, +inf too
+#: far, 0 too close) and ``ImageDepth16U`` (millimetres, 0 invalid or too close,
+#: 65535 too far).
+DEPTH_ENCODINGS = ("32F_m", "16U_mm")
+
+
+def depth_to_metres(pixels: np.ndarray, encoding: str) -> np.ndarray:
+    """(H, W) float32 depth in metres with NaN for every invalid pixel, from an (H, W) or
+    (H, W, 1) array of depth pixels in ``encoding`` (one of ``DEPTH_ENCODINGS``)."""
+    data = np.asarray(pixels)
+    if data.ndim == 3 and data.shape[2] == 1:
+        data = data[:, :, 0]
+    if data.ndim != 2:
+        raise ValueError(f"depth image: expected (H, W) or (H, W, 1) pixels, got {data.shape}")
+    if encoding == "32F_m":
+        depth = data.astype(np.float32, copy=True)
+        invalid = ~np.isfinite(depth) | (depth <= 0)
+    elif encoding == "16U_mm":
+        depth = data.astype(np.float32) * np.float32(1e-3)
+        invalid = (data == 0) | (data == np.iinfo(np.uint16).max)
+    else:
+        raise ValueError(f"depth image: unknown encoding '{encoding}'; known: "
+                         f"{list(DEPTH_ENCODINGS)}")
+    depth[invalid] = np.nan
+    return depth
