@@ -71,17 +71,39 @@ def _add_bench(sub) -> None:
 
 
 def _add_evaluate(sub) -> None:
-    p = sub.add_parser("evaluate", help="the paper's protocol: sequences x biases x methods")
+    p = sub.add_parser(
+        "evaluate", help="the paper's protocol: sequences x biases x seeds x methods",
+        description="Runs the four methods on the simulated sequences x bias variants x "
+                    "seeds, resumably: each finished task's result is kept in --out, and "
+                    "the same command (on either executor) runs only the rest. Ctrl-C or "
+                    "SIGTERM stops the workers. Writes summary.csv (percentiles, median "
+                    "over seeds, worst seed), errors.csv, failures.json, protocol.json "
+                    "and figures.",
+        epilog="examples:\n  drake-tracker evaluate --quick --out out/quick\n"
+               "  drake-tracker evaluate --quick --sequences s-full-arm --seeds 1 "
+               "--duration 3 --out out/slice\n"
+               "  drake-tracker evaluate --executor ray --address auto --out out/full")
     p.add_argument("--out", default="out/evaluate", help="output folder (resumable)")
     p.add_argument("--quick", action="store_true",
-                   help="short runs of each kind of sequence and bias (<= 15 min here)")
+                   help="10 s runs of five kinds of sequence x three biases x 3 seeds")
     p.add_argument("--seeds", type=int, default=None,
-                   help="runs per scenario (default: 1 quick, 10 full)")
+                   help="seeds per case; each seeds the simulation and the tracker "
+                        "(default: 3 quick, 10 full)")
     p.add_argument("--sequences", default=None,
                    help="comma-separated subset of the sequences (default: the mode's all)")
     p.add_argument("--methods", default=None,
                    help="comma-separated subset of the methods (default: all four)")
-    p.add_argument("--workers", type=int, default=2, help="processes (default: %(default)s)")
+    p.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                   help="shorten every run to this (a slice, e.g. to measure the cost)")
+    p.add_argument("--executor", choices=("local", "ray"), default="local",
+                   help="local: a process pool; ray: a Ray cluster (pip install "
+                        "'drake_tracker[cluster]'), see the README (default: %(default)s)")
+    p.add_argument("--address", default=None,
+                   help="with --executor ray: a running cluster ('auto' or HOST:6379); "
+                        "default: start a local Ray instance for this run")
+    p.add_argument("--workers", type=int, default=2,
+                   help="local processes, or CPUs of a local Ray instance (default: "
+                        "%(default)s)")
     p.add_argument("--settle-s", type=float, default=5.0,
                    help="the summary and box plots use errors from this time on (s, "
                         "default %(default)s); errors.csv keeps every sample")
@@ -90,7 +112,7 @@ def _add_evaluate(sub) -> None:
                         "use a new --out folder per parameter file (results are resumed)")
 
     def run(args):
-        from drake_tracker.evaluate import run_evaluate
+        from drake_tracker.evaluation.run import run_evaluate
 
         return run_evaluate(args)
 

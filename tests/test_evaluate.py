@@ -6,13 +6,13 @@ import csv
 import numpy as np
 import pytest
 
-from drake_tracker.evaluate import (
+from drake_tracker.evaluation import (
+    ResultStore,
     Task,
+    evaluate,
     evaluate_run,
-    load_errors,
     make_tasks,
     plot_results,
-    run_task,
     summarize,
     task_base_params,
     write_summary,
@@ -36,7 +36,10 @@ def test_task_lists_cover_the_protocol():
     full = make_tasks(False, None, METHODS)
     assert len(full) == 12 * 3 * 10
     quick = make_tasks(True, None, METHODS)
+    assert len(quick) == 5 * 3 * 3  # three seeds per case by default
+    assert {t.seed for t in quick} == {0, 1, 2}
     assert {t.bias for t in quick} == {"none", "constant", "time-varying"}
+    assert {t.duration_s for t in make_tasks(True, 1, METHODS, duration_s=2.0)} == {2.0}
     assert {"in-out-in", "occlusion", "arm++"} <= {t.sequence for t in quick}
     # The shortened in-out-in still leaves the view within its duration.
     scenario = next(t for t in quick if t.sequence == "in-out-in").scenario()
@@ -53,19 +56,47 @@ def test_evaluate_run_orders_the_methods_on_a_biased_run():
     assert fusion < encoders / 3.0
 
 
-def _fake_rows(tmp_path):
+def test_the_task_seed_reaches_the_tracker(monkeypatch):
+    import drake_tracker.offline as offline
+
+    seen = []
+
+    def fake_replay(run, params, model, sample_times_s):
+        seen.append(params.image.seed)
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(offline, "replay_run", fake_replay)
+    model = build_tracker_model(robot_preset("apollo"))
+    run = synthetic_run(model, duration_s=0.2, bias_rad=0.0, seed=1)
+    from drake_tracker.params import TrackerParams
+
+    base = TrackerParams()
+    base.image.seed = 40
+    for tracker_seed in (0, 2):
+        with pytest.raises(RuntimeError, match="stop here"):
+            evaluate_run(run, ("full_fusion",), base_params=base, tracker_seed=tracker_seed)
+    assert seen == [40, 42]
+
+
+def _write_fake_results(out_dir, seeds=(0,), sequences=("s-full-arm", "occlusion")):
     rng = np.random.default_rng(0)
-    (tmp_path / "results").mkdir()
-    for seq in ("s-full-arm", "occlusion"):
-        path = tmp_path / "results" / f"{seq}__constant__seed0.csv"
-        with path.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["sequence", "bias", "method", "seed", "time_s", "translation_mm",
-                        "rotation_deg"])
-            for method in METHODS:
-                for t in np.arange(0, 2, 0.05):
-                    w.writerow([seq, "constant", method, 0, t, rng.gamma(2, 5), rng.gamma(2)])
-    return load_errors(tmp_path)
+    (out_dir / "results").mkdir(parents=True, exist_ok=True)
+    for seq in sequences:
+        for seed in seeds:
+            path = out_dir / "results" / f"{seq}__constant__seed{seed}.csv"
+            with path.open("w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(["sequence", "bias", "method", "seed", "time_s", "translation_mm",
+                            "rotation_deg"])
+                for method in METHODS:
+                    for t in np.arange(0, 2, 0.05):
+                        w.writerow([seq, "constant", method, seed, t,
+                                    (1 + seed) * rng.gamma(2, 5), rng.gamma(2)])
+
+
+def _fake_rows(tmp_path):
+    _write_fake_results(tmp_path)
+    return ResultStore(tmp_path).load_rows()
 
 
 def test_summary_columns_and_percentiles(tmp_path):
@@ -76,7 +107,8 @@ def test_summary_columns_and_percentiles(tmp_path):
     with (tmp_path / "summary.csv").open() as f:
         reader = csv.DictReader(f)
         assert reader.fieldnames == ["sequence", "bias", "method", "metric", "p1", "p25",
-                                     "p50", "p75", "p99"]
+                                     "p50", "p75", "p99", "seeds", "median_over_seeds",
+                                     "worst_seed_median", "worst_seed"]
         first = next(reader)
     values = [float(r["translation_mm"]) for r in rows
               if (r["sequence"], r["method"]) == (first["sequence"], first["method"])]
@@ -85,13 +117,31 @@ def test_summary_columns_and_percentiles(tmp_path):
     assert all(p.stat().st_size > 0 for p in paths)
 
 
+def test_the_summary_reports_the_median_over_seeds_and_the_worst_seed(tmp_path):
+    _write_fake_results(tmp_path, seeds=(0, 1, 2), sequences=("arm",))
+    rows = ResultStore(tmp_path).load_rows()
+    summary = summarize(rows, settle_s=0.5)
+    for row in summary:
+        per_seed = {s: np.median([float(r[row["metric"]]) for r in rows
+                                  if (r["method"], int(r["seed"])) == (row["method"], s)
+                                  and float(r["time_s"]) >= 0.5]) for s in (0, 1, 2)}
+        assert row["seeds"] == 3
+        assert row["median_over_seeds"] == pytest.approx(np.median(list(per_seed.values())))
+        worst = max(per_seed, key=per_seed.get)
+        assert (row["worst_seed"], row["worst_seed_median"]) == (worst, pytest.approx(
+            per_seed[worst]))
+    # The translation errors were drawn scaled by (1 + seed): seed 2 is the worst.
+    assert {r["worst_seed"] for r in summary if r["metric"] == "translation_mm"} == {2}
+
+
 def test_a_finished_task_is_not_run_again(tmp_path):
-    task = Task("s-full-arm", "constant", 0, 1.0, 0.1, ("encoders_only",))
-    result = tmp_path / "results" / f"{task.name}.csv"
-    result.parent.mkdir(parents=True)
-    result.write_text("sentinel")
-    assert run_task(task, tmp_path) == task.name
-    assert result.read_text() == "sentinel"
+    """Result files present: nothing is simulated, the summary is read from them."""
+    _write_fake_results(tmp_path, sequences=("s-full-arm",))
+    task = Task("s-full-arm", "constant", 0, 2.0, 0.1, METHODS)
+    summary = evaluate([task], tmp_path, settle_s=0.0, progress=False)
+    assert not (tmp_path / "runs").exists()
+    assert len(summary) == 2 * len(METHODS)
+    assert (tmp_path / "failures.json").read_text().strip() == "{}"
 
 
 def test_a_parameter_file_reaches_every_task(tmp_path):
@@ -110,14 +160,13 @@ def test_a_parameter_file_reaches_every_task(tmp_path):
 def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     """One short sequence, two methods, one seed, through the same entry point as the
     command; the summary is checked against numpy on the written samples."""
-    from drake_tracker.evaluate import evaluate
-
     task = Task("s-full-arm", "constant", 0, 1.5, 0.1, ("encoders_only", "full_fusion"))
     settle_s = 0.5
     summary = evaluate([task], tmp_path, settle_s=settle_s, progress=False)
     for name in ("errors.csv", "summary.csv", "summary.txt", "boxplot_translation_mm.png",
                  "boxplot_rotation_deg.png", "timeseries_s-full-arm_constant.png",
-                 f"runs/{task.name}.npz", f"results/{task.name}.csv"):
+                 f"runs/{task.name}.npz", f"results/{task.name}.csv",
+                 f"results/{task.name}.json", "protocol.json", "failures.json"):
         assert (tmp_path / name).stat().st_size > 0, name
     with (tmp_path / "errors.csv").open() as f:
         rows = list(csv.DictReader(f))
@@ -136,6 +185,13 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     enc = next(r for r in written
                if (r["method"], r["metric"]) == ("encoders_only", "translation_mm"))
     assert float(enc["p50"]) > 50.0
+    # protocol.json records what the results depend on, as the worker saw it.
+    import json
+
+    protocol = json.loads((tmp_path / "protocol.json").read_text())
+    (env,) = protocol["task_environments"]
+    assert set(env["versions"]) == {"drake", "numpy", "numba", "llvmlite", "python"}
+    assert env["cpu"] and env["numba_threads"] >= 1 and env["tasks"] == 1
     # Resuming with another protocol in the same folder is refused, by name.
     other = Task("s-full-arm", "constant", 0, 2.0, 0.1, ("encoders_only", "full_fusion"))
     with pytest.raises(ValueError, match="another protocol"):

@@ -1,0 +1,124 @@
+"""The evaluation's figures: box plots of the settled errors (one box per method and
+case) and a time series of every sample per case (bias changes dotted, occlusion and
+out-of-view intervals shaded)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from drake_tracker.evaluation.summary import settled
+from drake_tracker.evaluation.tasks import task_name
+from drake_tracker.methods import METHODS
+
+#: One colour per method; the box plots draw their medians black over these.
+METHOD_COLORS = dict(zip(METHODS, ("0.6", "tab:blue", "tab:orange", "tab:green")))
+MEDIAN_LINE = {"color": "black", "linewidth": 1.6}
+
+
+def plot_results(rows: list[dict], out_dir: Path, settle_s: float = 0.0,
+                 scenarios: dict | None = None) -> list[Path]:
+    """Box plots per metric (one box per method and sequence/bias) of the samples from
+    ``settle_s`` on, and time series of every sample. ``scenarios`` maps (sequence,
+    bias) to the Scenario of the plotted seed (default: the stored run's, or the
+    preset's)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    written = []
+    late = settled(rows, settle_s)
+    cases = sorted({(r["sequence"], r["bias"]) for r in rows})
+    methods = [m for m in METHODS if any(r["method"] == m for r in rows)]
+    box_metrics = (("translation_mm", "translation error (mm)"),
+                   ("rotation_deg", "rotation error (deg)")) if late else ()
+    for metric, unit in box_metrics:  # no box plots when no sample is settled
+        fig, ax = plt.subplots(figsize=(max(8, 1.2 * len(cases)), 4.5))
+        width = 0.8 / max(1, len(methods))
+        for i, method in enumerate(methods):
+            data = []
+            for case in cases:
+                v = np.array([float(r[metric]) for r in late
+                              if (r["sequence"], r["bias"]) == case and r["method"] == method])
+                data.append(v[np.isfinite(v)])
+            positions = np.arange(len(cases)) + (i - (len(methods) - 1) / 2) * width
+            bp = ax.boxplot(data, positions=positions, widths=width * 0.9, whis=(1, 99),
+                            showfliers=False, patch_artist=True, medianprops=MEDIAN_LINE)
+            for patch in bp["boxes"]:
+                patch.set_facecolor(METHOD_COLORS[method])
+            ax.plot([], [], color=METHOD_COLORS[method], lw=6, label=method)
+        ax.plot([], [], label="median", **MEDIAN_LINE)
+        ax.set_xticks(np.arange(len(cases)))
+        ax.set_xticklabels([f"{s}\n{b}" for s, b in cases], fontsize=7)
+        ax.set_yscale("log")
+        ax.set_ylabel(unit + ", whiskers p1-p99")
+        if settle_s > 0:
+            ax.set_title(f"errors from t = {settle_s:g} s on, all seeds", fontsize=9)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = out_dir / f"boxplot_{metric}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+    for seq, bias in cases:
+        scenario = (scenarios or {}).get((seq, bias))
+        written.append(_plot_time_series(rows, seq, bias, methods, out_dir, plt, settle_s,
+                                         scenario))
+    return written
+
+
+def _stored_scenario(out_dir: Path, seq: str, bias: str, seed: int):
+    """The scenario a stored run was simulated with (the preset if the run is gone)."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_tracker.recording import RecordedRun
+    from drake_tracker.sim.scenario import Scenario, load_scenario
+
+    path = out_dir / "runs" / f"{task_name(seq, bias, seed)}.npz"
+    if path.exists():
+        text = RecordedRun.load(path).scenario_yaml
+        if text:
+            return yaml_load_typed(schema=Scenario, data=text)
+    return load_scenario(f"{seq}/{bias}", validate=False)
+
+
+def _plot_time_series(rows, seq, bias, methods, out_dir, plt, settle_s, scenario) -> Path:
+    seed0 = min(int(r["seed"]) for r in rows if (r["sequence"], r["bias"]) == (seq, bias))
+    if scenario is None:
+        scenario = _stored_scenario(out_dir, seq, bias, seed0)
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    t_end = 0.0
+    for method in methods:
+        sel = [r for r in rows if (r["sequence"], r["bias"], r["method"], int(r["seed"]))
+               == (seq, bias, method, seed0)]
+        t = np.array([float(r["time_s"]) for r in sel])
+        e = np.array([float(r["translation_mm"]) for r in sel])
+        if len(t):
+            t_end = max(t_end, t[-1])
+        ax.plot(t, e, color=METHOD_COLORS[method], label=method, lw=1)
+    if scenario.encoders.bias == "steps":
+        for k in range(1, int(t_end / scenario.encoders.step_period_s) + 1):
+            ax.axvline(k * scenario.encoders.step_period_s, color="k", ls=":", lw=0.8)
+    if scenario.occluder.enabled:
+        ax.axvspan(scenario.occluder.start_s, min(scenario.occluder.end_s, t_end),
+                   color="0.85", label="occluded")
+    if scenario.trajectory.kind == "in-out-in":
+        tr = scenario.trajectory
+        ax.axvspan(tr.excursion_start_s, min(t_end, tr.excursion_start_s
+                                             + 2 * tr.excursion_ramp_s + tr.excursion_duration_s),
+                   color="0.9", label="leaving / out of view")
+    if 0 < settle_s < t_end:
+        ax.axvline(settle_s, color="tab:red", ls="--", lw=0.8, label="summary from here")
+    ax.set_yscale("log")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("translation error (mm)")
+    ax.set_title(f"{seq} / {bias} (seed {seed0})")
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    path = out_dir / f"timeseries_{seq.replace('+', 'p')}_{bias}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

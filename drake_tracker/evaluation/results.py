@@ -1,0 +1,113 @@
+"""The evaluation's folder: per-task results, failures and ``protocol.json``.
+
+Only the driver writes here. A task's payload becomes ``results/<task>.json`` (its
+environment and wall times) and then ``results/<task>.csv`` (its errors), each written
+to a temporary file and renamed, so a result file is always complete. A task counts as
+done when its CSV exists: a stopped evaluation resumes with the others, whichever
+executor ran the finished ones.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from pathlib import Path
+
+from drake_tracker.evaluation.tasks import Task, environment
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+class ResultStore:
+    """Reads and writes the files of one evaluation folder."""
+
+    def __init__(self, out_dir: Path):
+        self.out_dir = Path(out_dir)
+        self.results_dir = self.out_dir / "results"
+
+    def result_path(self, name: str) -> Path:
+        return self.results_dir / f"{name}.csv"
+
+    def is_done(self, task: Task) -> bool:
+        return self.result_path(task.name).exists()
+
+    def write(self, payload: dict) -> None:
+        """Writes a task's payload (from :func:`~.tasks.compute_task`), CSV last."""
+        name = payload["name"]
+        meta = {k: v for k, v in payload.items() if k != "csv"}
+        _write_atomic(self.results_dir / f"{name}.json", json.dumps(meta, indent=1))
+        _write_atomic(self.result_path(name), payload["csv"])
+
+    def load_rows(self, tasks: list[Task] | None = None) -> list[dict]:
+        """Every stored error sample (of ``tasks`` only, if given)."""
+        names = None if tasks is None else {t.name for t in tasks}
+        rows = []
+        for path in sorted(self.results_dir.glob("*.csv")):
+            if names is None or path.stem in names:
+                with path.open() as f:
+                    rows.extend(csv.DictReader(f))
+        return rows
+
+    def load_metas(self, tasks: list[Task]) -> list[dict]:
+        """The stored environments and wall times of ``tasks`` (older results have none)."""
+        metas = []
+        for task in tasks:
+            path = self.results_dir / f"{task.name}.json"
+            if path.exists() and self.is_done(task):
+                metas.append(json.loads(path.read_text()))
+        return metas
+
+    def write_failures(self, failures: dict[str, str]) -> Path:
+        """``failures.json``: {task name: error text} of the tasks that failed twice
+        in the last run (empty when all succeeded)."""
+        path = self.out_dir / "failures.json"
+        _write_atomic(path, json.dumps(failures, indent=1))
+        return path
+
+
+def protocol_settings(tasks: list[Task]) -> list:
+    """What must match for results to share a folder (task files are named by
+    sequence, bias and seed only): duration, image interval, methods, parameters."""
+    return sorted({json.dumps([t.duration_s, t.min_image_interval_s, list(t.methods),
+                               t.params_yaml]) for t in tasks})
+
+
+def check_same_protocol(tasks: list[Task], out_dir: Path) -> None:
+    """Refuses (ValueError) to mix results of different protocols in one folder; writes
+    ``protocol.json`` with the settings and the driver's environment on first use."""
+    path = Path(out_dir) / "protocol.json"
+    settings = protocol_settings(tasks)
+    if path.exists():
+        stored = json.loads(path.read_text())
+        stored_settings = stored["settings"] if isinstance(stored, dict) else stored
+        if stored_settings != settings:
+            raise ValueError(f"{out_dir} holds results of another protocol (duration, image "
+                             f"interval, methods or parameters: {stored_settings}); use a new "
+                             f"--out folder")
+    else:
+        _write_atomic(path, json.dumps({"settings": settings, "driver": environment(),
+                                        "task_environments": []}, indent=1))
+
+
+def record_environments(out_dir: Path, metas: list[dict]) -> list[dict]:
+    """Adds the distinct environments the finished tasks ran in (package versions, CPU,
+    numba threads), with their task counts, to ``protocol.json``; returns them."""
+    path = Path(out_dir) / "protocol.json"
+    stored = json.loads(path.read_text())
+    if not isinstance(stored, dict):
+        stored = {"settings": stored}
+    counts: dict[str, int] = {}
+    for meta in metas:
+        if "environment" in meta:
+            key = json.dumps(meta["environment"], sort_keys=True)
+            counts[key] = counts.get(key, 0) + 1
+    environments = [{**json.loads(k), "tasks": n} for k, n in sorted(counts.items())]
+    stored["task_environments"] = environments
+    _write_atomic(path, json.dumps(stored, indent=1))
+    return environments

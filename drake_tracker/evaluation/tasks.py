@@ -1,0 +1,275 @@
+"""The evaluation's unit of work: a task is one (sequence, bias variant, seed).
+
+A task simulates its run (or loads it from a cache folder), replays it through every
+method, and **returns** its result as a payload (the text of its per-task CSV, the
+environment it ran in, and its wall times). It never writes its result itself: the
+driver writes the payload atomically into ``results/``, so workers need no file system
+in common with the driver (a Ray cluster without shared storage).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import platform
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from drake_tracker.methods import method_params
+from drake_tracker.metrics import pose_errors
+
+#: The quick suite: each kind of sequence (sinusoid, free, fast, out of view, occlusion)
+#: with each bias variant, shortened.
+QUICK_SEQUENCES = ("s-full-arm", "s-head-arm", "arm++", "in-out-in", "occlusion")
+QUICK_DURATION_S = 10.0
+QUICK_IMAGE_INTERVAL_S = 0.1
+#: Seeds per case by default (each seed varies the simulation and the tracker).
+QUICK_SEEDS = 3
+FULL_SEEDS = 10
+BIASES = ("none", "constant", "time-varying")
+#: Errors are sampled every this many seconds.
+SAMPLE_PERIOD_S = 0.05
+#: The summary and box plots use the errors from this time on (s): the targets are
+#: stated after the first 5 s of each sequence, once the tracker has converged from
+#: its start. errors.csv and the time series keep every sample.
+SETTLE_S = 5.0
+#: Columns of a task's result CSV (and of errors.csv).
+ERROR_COLUMNS = ("sequence", "bias", "method", "seed", "time_s", "translation_mm",
+                 "rotation_deg")
+
+#: ``report(message)``: a task's progress inside its run, e.g. "simulating 3/10 s".
+Reporter = Callable[[str], None]
+
+
+def task_name(sequence: str, bias: str, seed: int) -> str:
+    """The stem of a task's files in ``runs/`` and ``results/``."""
+    return f"{sequence.replace('+', 'p')}__{bias}__seed{seed}"
+
+
+@dataclass(frozen=True)
+class Task:
+    """One (sequence, bias variant, seed) run, evaluated with ``methods``.
+
+    ``seed`` seeds both the simulation (scenario seed) and the tracker's particle
+    filter (added to the parameters' ``image.seed``).
+    """
+
+    sequence: str
+    bias: str
+    seed: int
+    duration_s: float | None
+    min_image_interval_s: float
+    methods: tuple[str, ...]
+    #: Tracker parameters (YAML of TrackerParams) the methods start from; "" = defaults.
+    params_yaml: str = ""
+
+    @property
+    def name(self) -> str:
+        return task_name(self.sequence, self.bias, self.seed)
+
+    def scenario(self):
+        """The preset with this task's seed; a shortened run keeps its events in it (the
+        hand leaves the view, the occluder passes) by compressing their timing."""
+        from drake_tracker.sim.scenario import load_scenario
+
+        scenario = load_scenario(f"{self.sequence}/{self.bias}")
+        scenario.seed = self.seed
+        if self.duration_s is not None and self.duration_s < scenario.duration_s:
+            d = self.duration_s
+            t = scenario.trajectory
+            t.excursion_start_s, t.excursion_ramp_s = 0.2 * d, 0.1 * d
+            t.excursion_duration_s = 0.4 * d
+            o = scenario.occluder
+            o.start_s, o.end_s = 0.25 * d, 0.85 * d
+            e = scenario.encoders
+            e.step_period_s = min(e.step_period_s, 0.3 * d)
+            e.step_transition_s = min(e.step_transition_s, 0.5 * e.step_period_s)
+            scenario.duration_s = d
+        return scenario
+
+
+def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...],
+               params_yaml: str = "", duration_s: float | None = None) -> list[Task]:
+    """The protocol's tasks: the quick suite (``QUICK_SEQUENCES``, 10 s, 3 seeds) or the
+    full one (12 sequences at their preset durations, 10 seeds), × the bias variants.
+    ``duration_s`` shortens every run (a slice for cost measurements and tests)."""
+    from drake_tracker.sim.scenario import SEQUENCES
+
+    if quick:
+        sequences, duration, num_seeds = QUICK_SEQUENCES, QUICK_DURATION_S, seeds or QUICK_SEEDS
+    else:
+        sequences, duration, num_seeds = SEQUENCES, None, seeds or FULL_SEEDS
+    if duration_s is not None:
+        duration = duration_s
+    return [Task(seq, bias, seed, duration, QUICK_IMAGE_INTERVAL_S, methods, params_yaml)
+            for seq in sequences for bias in BIASES for seed in range(num_seeds)]
+
+
+def task_base_params(task: Task):
+    """The TrackerParams a task's methods start from (None: the defaults)."""
+    if not task.params_yaml:
+        return None
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_tracker.params import TrackerParams, validate_tracker_params
+
+    params = yaml_load_typed(schema=TrackerParams, data=task.params_yaml)
+    validate_tracker_params(params)
+    return params
+
+
+def _sample_times(run, period_s: float) -> np.ndarray:
+    start = run.truth_times_s[0]
+    return np.arange(start, run.truth_times_s[-1] + 1e-9, period_s)
+
+
+def evaluate_run(run, methods: Iterable[str], min_image_interval_s: float = 0.0,
+                 sample_period_s: float = SAMPLE_PERIOD_S, base_params=None,
+                 tracker_seed: int = 0, report: Reporter | None = None,
+                 wall_s: dict[str, float] | None = None) -> dict[str, dict[str, np.ndarray]]:
+    """Errors of each method on one recorded run, at regular sample times.
+
+    ``tracker_seed`` is added to the parameters' ``image.seed``. Returns
+    {method: {"times_s", "translation_mm", "rotation_deg"}}; each method's wall time
+    goes into ``wall_s`` if given.
+    """
+    from drake_tracker.offline import encoders_only_X_CE, model_for_run, replay_run
+
+    model = model_for_run(run)
+    times = _sample_times(run, sample_period_s)
+    truth_index = np.clip(np.searchsorted(run.truth_times_s, times), 0,
+                          len(run.truth_times_s) - 1)
+    X_true = run.truth_X_CE[truth_index]
+    out = {}
+    initial = {n: float(q) for n, q in zip(run.joint_names, run.truth_positions_rad[0])}
+    methods = list(methods)
+    for k, method in enumerate(methods, 1):
+        if report:
+            report(f"{method} ({k}/{len(methods)})")
+        start = time.perf_counter()
+        if method == "encoders_only":
+            X = encoders_only_X_CE(run, model)[truth_index]
+        else:
+            params = method_params(method, base_params, initial_positions_rad=initial)
+            params.image.min_image_interval_s = min_image_interval_s
+            params.image.seed += int(tracker_seed)
+            X = replay_run(run, params, model, sample_times_s=times).X_CE
+        if wall_s is not None:
+            wall_s[method] = time.perf_counter() - start
+        ok = np.all(np.isfinite(X.reshape(len(X), -1)), axis=1)
+        t_err = np.full(len(times), np.nan)
+        r_err = np.full(len(times), np.nan)
+        t_err[ok], r_err[ok] = pose_errors(X[ok], X_true[ok])
+        out[method] = {"times_s": times, "translation_mm": t_err, "rotation_deg": r_err}
+    return out
+
+
+def errors_csv_text(task: Task, errors: dict[str, dict[str, np.ndarray]]) -> str:
+    """The per-task result CSV (columns :data:`ERROR_COLUMNS`)."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(ERROR_COLUMNS)
+    for method, e in errors.items():
+        for t, tr, rot in zip(e["times_s"], e["translation_mm"], e["rotation_deg"]):
+            writer.writerow([task.sequence, task.bias, method, task.seed, f"{t:.4f}",
+                             f"{tr:.4f}", f"{rot:.5f}"])
+    return buffer.getvalue()
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def environment() -> dict:
+    """What a result depends on besides its inputs: package versions, CPU, threads."""
+    import numba
+
+    versions = {}
+    for package in ("drake", "numpy", "numba", "llvmlite"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = "not installed"
+    versions["python"] = platform.python_version()
+    return {"versions": versions, "cpu": _cpu_model(), "cpu_count": os.cpu_count(),
+            "platform": platform.platform(), "numba_threads": numba.get_num_threads(),
+            "numba_threading_layer": str(numba.config.THREADING_LAYER),
+            "NUMBA_NUM_THREADS": os.environ.get("NUMBA_NUM_THREADS", "")}
+
+
+def _simulation_progress(report: Reporter, duration_s: float):
+    """``add_systems`` hook of simulate_and_record: reports the simulated time once a
+    simulated second (a publish event, which changes no state)."""
+    from pydrake.systems.framework import LeafSystem
+
+    def add(builder, world):
+        probe = LeafSystem()
+        probe.set_name("evaluation_progress")
+        probe.DeclarePeriodicPublishEvent(
+            1.0, 0.0, lambda context: report(f"simulating {context.get_time():.0f}/"
+                                             f"{duration_s:g} s"))
+        builder.AddSystem(probe)
+        return {}
+
+    return add
+
+
+def _load_or_simulate(task: Task, cache_dir: Path | None, report: Reporter):
+    from drake_tracker.recording import RecordedRun
+    from drake_tracker.sim.record import simulate_and_record
+
+    path = cache_dir / f"{task.name}.npz" if cache_dir is not None else None
+    if path is not None and path.exists():
+        report("loading the cached run")
+        return RecordedRun.load(path)
+    scenario = task.scenario()
+    run = simulate_and_record(scenario,
+                              add_systems=_simulation_progress(report, scenario.duration_s))
+    if path is not None:
+        partial = path.with_name(f"{task.name}.partial.npz")
+        run.save(partial)
+        os.replace(partial, path)  # atomic: a cached run is always complete
+    return run
+
+
+def compute_task(task: Task, cache_dir: Path | None = None,
+                 report: Reporter | None = None) -> dict:
+    """Runs one task and returns its payload: ``{"name", "csv", "environment",
+    "simulated_s", "wall_s": {"simulate", <method>...}}``.
+
+    ``cache_dir``: where simulated runs are cached (``None`` when the worker shares no
+    file system with the driver: the run is simulated and not kept).
+    """
+    report = report or (lambda message: None)
+    start = time.perf_counter()
+    run = _load_or_simulate(task, cache_dir, report)
+    wall_s = {"simulate": time.perf_counter() - start}
+    errors = evaluate_run(run, task.methods, task.min_image_interval_s,
+                          base_params=task_base_params(task), tracker_seed=task.seed,
+                          report=report, wall_s=wall_s)
+    return {"name": task.name, "csv": errors_csv_text(task, errors),
+            "environment": environment(), "simulated_s": float(run.duration_s),
+            "wall_s": wall_s}
+
+
+class TaskRunner:
+    """Picklable ``function(task, report) -> payload`` that executors run."""
+
+    def __init__(self, cache_dir: Path | None):
+        self.cache_dir = cache_dir
+
+    def __call__(self, task: Task, report: Reporter) -> dict:
+        return compute_task(task, self.cache_dir, report)
