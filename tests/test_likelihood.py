@@ -131,7 +131,7 @@ def test_fused_pixel_kernel_equals_scalar_formula():
     o = observation
     pixel_log_ratios(slots, d, len(z), o.z, o.inv_sigma, o.lam_sigma2, o.gauss_coeff,
                      o.occ_coeff, o.log_p_occ_inf, o.uniform, o.occluder_rate_per_m,
-                     o.occlusion_probability, _ERFC_COEFFS, terms)
+                     o.occlusion_probability, _ERFC_COEFFS, terms, np.empty((4, len(z))))
     expected = np.array([_scalar_log_ratio(a, b, PARAMS) for a, b in zip(z, d)])
     assert np.ptp(expected) > 5.0
     # Stated tolerance: 1e-12 of the term's size (erfc table ~1e-15 absolute, FMA rounding).

@@ -28,6 +28,7 @@ from numba import njit, prange
 import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
 from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.core.rasterize import num_chunks, render_particle
+from drake_tracker.core.vector_math import exp_inplace, log_inplace
 
 #: LLVM fast-math flags proven harmless for the pixel loop: no signed zeros, reciprocal
 #: instead of division, fused multiply-add, approximate libm functions. ``fastmath=True``
@@ -60,18 +61,25 @@ _ERFC_TOP = _ERFC_HI - 1e-9
 
 @njit(cache=True, fastmath=SAFE_FASTMATH)
 def pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
-                     log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs, terms):
+                     log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs, terms, work):
     """terms[i] = log(p(z_p | d_i) / p_occ(z_p | inf)) for p = slots[i], d_i = depths[i],
-    i < count: every term computed, no branches (see the module docstring)."""
+    i < count: every term computed, no branches, in passes over the arrays that LLVM
+    vectorises (exp and log from :mod:`~drake_tracker.core.vector_math`). ``work``:
+    float64 scratch (4, >= count)."""
     inv_sqrt2 = 1.0 / math.sqrt(2.0)
     visible = 1.0 - occlusion
+    gauss = work[0]
+    decay = work[1]
+    occluded = work[2]
+    scratch = work[3]
     for i in range(count):
         p = slots[i]
         d = depths[i]
         s = inv_sigma[p]
         dz = z[p] - d
         rr = dz * s
-        p_vis = uniform + gauss_coeff[p] * math.exp(-0.5 * rr * rr)
+        gauss[i] = -0.5 * rr * rr
+        decay[i] = -lam * d
         x = min(max((dz - lam_sigma2[p]) * (s * inv_sqrt2), _ERFC_LO), _ERFC_TOP)
         u = (x - _ERFC_LO) * _ERFC_PER_UNIT
         k = int(u)
@@ -79,8 +87,17 @@ def pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff
         acc = erfc_coeffs[k, _ERFC_DEGREE]
         for j in range(_ERFC_DEGREE - 1, -1, -1):
             acc = acc * t + erfc_coeffs[k, j]
-        p_occ = uniform + occ_coeff[p] * (0.5 * acc) / (1.0 - math.exp(-lam * d))
-        terms[i] = math.log(visible * p_vis + occlusion * p_occ) - log_p_occ_inf[p]
+        occluded[i] = occ_coeff[p] * (0.5 * acc)
+    exp_inplace(gauss, count, scratch)
+    exp_inplace(decay, count, scratch)
+    for i in range(count):
+        p = slots[i]
+        p_vis = uniform + gauss_coeff[p] * gauss[i]
+        p_occ = uniform + occluded[i] / (1.0 - decay[i])
+        terms[i] = visible * p_vis + occlusion * p_occ
+    log_inplace(terms, count, scratch)
+    for i in range(count):
+        terms[i] -= log_p_occ_inf[slots[i]]
 
 
 @njit(parallel=True, cache=True)
@@ -103,6 +120,7 @@ def _score_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
         slots = np.empty(height * width, dtype=np.int64)
         depths = np.empty(height * width)
         terms = np.empty(height * width)
+        work = np.empty((4, height * width))
         for n in range(chunk * N // chunks, (chunk + 1) * N // chunks):
             rows[0] = height
             rows[1] = -1
@@ -129,7 +147,7 @@ def _score_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
                         count += 1
             pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff,
                              occ_coeff, log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs,
-                             terms)
+                             terms, work)
             total = 0.0
             for i in range(count):
                 total += terms[i]
