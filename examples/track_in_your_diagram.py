@@ -3,9 +3,10 @@
 Run: python examples/track_in_your_diagram.py [--duration 4] [--depth 32F|16U]
 
 The Diagram is what a Drake user already has: the robot's MultibodyPlant (Apollo,
-shipped in ``models/``), posed along a trajectory by a ``TrajectorySource``; a stock
-``RgbdSensor`` on the robot's head, mounted 2 cm / 2 deg off its nominal frame; and
-encoders. The only custom part is the encoder bias
+shipped in ``models/``; ``examples/vendor_robot.py`` runs the same with a vendor's
+Franka Panda), posed along a trajectory by a ``TrajectorySource``; a stock
+``RgbdSensor`` at the robot's camera frame, mounted 2 cm / 2 deg off its nominal pose;
+and encoders. The only custom part is the encoder bias
 (:class:`drake_tracker.sim.encoders.BiasedEncoders`: 8.6 deg on every arm joint).
 
 What the tracker takes from it:
@@ -33,7 +34,6 @@ from pydrake.geometry import (
     SceneGraph,
 )
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder
@@ -50,14 +50,30 @@ from drake_tracker import (
     TrackerSystems,
     build_tracker_model,
 )
-from drake_tracker.robot import models_dir
+from drake_tracker.robot import add_robot
 from drake_tracker.sim.encoders import BiasedEncoders
 from drake_tracker.sim.scenario import EncoderConfig
 
+
+@dataclass
+class RobotMotion:
+    """A robot and how the example moves it: ``moved`` joints swing 15 deg about
+    ``home_rad`` (joints not listed there stay at 0), ``biased`` ones read 8.6 deg off."""
+
+    config: RobotConfig
+    home_rad: dict[str, float]
+    moved: list[str]
+    biased: list[str]
+
+
 ARM = [f"arm_joint_{k}" for k in range(1, 8)]
-#: A pose with the hand in the head camera's view (deg); other joints at 0.
-HOME_DEG = {"head_tilt": 32.0, "arm_joint_1": 20.0, "arm_joint_2": 60.0,
-            "arm_joint_4": -60.0, "arm_joint_6": -30.0}
+#: Apollo, with the hand in the head camera's view.
+APOLLO = RobotMotion(
+    RobotConfig("apollo.sdf", camera_frame="camera_optical", end_effector_frame="end_effector"),
+    home_rad={name: np.radians(deg) for name, deg in (
+        ("head_tilt", 32.0), ("arm_joint_1", 20.0), ("arm_joint_2", 60.0),
+        ("arm_joint_4", -60.0), ("arm_joint_6", -30.0))},
+    moved=ARM, biased=ARM)
 #: The camera's true mounting relative to its nominal frame: 2 cm and 2 deg off.
 X_NOMINAL_TRUE = RigidTransform(RollPitchYaw(np.radians([2.0, -1.5, 1.0])),
                                 np.array([0.02, -0.015, 0.01]))
@@ -72,13 +88,15 @@ class TrackingDemo:
     plant: MultibodyPlant
     trajectory: PiecewisePolynomial
     encoders: BiasedEncoders
+    config: RobotConfig
 
     def true_X_CE(self, t: float) -> np.ndarray:
         """The hand in the TRUE camera frame at time ``t`` (4x4)."""
         context = self.plant.CreateDefaultContext()
         self.plant.SetPositions(context, self.trajectory.value(t).ravel())
-        X_WN = self.plant.GetFrameByName("camera_optical").CalcPoseInWorld(context)
-        X_WE = self.plant.GetFrameByName("end_effector").CalcPoseInWorld(context)
+        X_WN = self.plant.GetFrameByName(self.config.camera_frame).CalcPoseInWorld(context)
+        X_WE = self.plant.GetFrameByName(self.config.end_effector_frame).CalcPoseInWorld(
+            context)
         return ((X_WN @ X_NOMINAL_TRUE).inverse() @ X_WE).GetAsMatrix4()
 
     def encoders_only_X_CE(self, readings: np.ndarray) -> np.ndarray:
@@ -86,31 +104,34 @@ class TrackingDemo:
         context = self.plant.CreateDefaultContext()
         self.plant.SetPositions(context, readings)
         return self.plant.CalcRelativeTransform(
-            context, self.plant.GetFrameByName("camera_optical"),
-            self.plant.GetFrameByName("end_effector")).GetAsMatrix4()
+            context, self.plant.GetFrameByName(self.config.camera_frame),
+            self.plant.GetFrameByName(self.config.end_effector_frame)).GetAsMatrix4()
 
 
-def sinusoid(plant: MultibodyPlant, duration_s: float) -> PiecewisePolynomial:
-    """The arm joints swing 15 deg about HOME_DEG, each with its own period."""
+def sinusoid(plant: MultibodyPlant, robot: RobotMotion, duration_s: float
+             ) -> PiecewisePolynomial:
+    """The moved joints swing 15 deg about the home pose, each with its own period."""
     home = np.zeros(plant.num_positions())
-    for name, deg in HOME_DEG.items():
-        home[plant.GetJointByName(name).position_start()] = np.radians(deg)
+    for name, angle in robot.home_rad.items():
+        home[plant.GetJointByName(name).position_start()] = angle
     times = np.arange(0.0, duration_s + 0.02, 0.01)
     q = np.tile(home[:, None], (1, len(times)))
-    for k, name in enumerate(ARM):
+    for k, name in enumerate(robot.moved):
         row = plant.GetJointByName(name).position_start()
         q[row] += np.radians(15.0) * np.sin(2 * np.pi * times / (8.0 * (1 + 0.17 * k)))
     return PiecewisePolynomial.CubicShapePreserving(times, q)
 
 
-def build(depth: str = "32F", duration_s: float = 4.0, seed: int = 0) -> TrackingDemo:
+def build(depth: str = "32F", duration_s: float = 4.0, seed: int = 0,
+          robot: RobotMotion = APOLLO, params: TrackerParams | None = None) -> TrackingDemo:
     """The Diagram: plant, RgbdSensor (``depth`` 32F or 16U), encoders, tracker."""
     builder = DiagramBuilder()
     scene_graph = builder.AddSystem(SceneGraph())
     scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
     plant = MultibodyPlant(time_step=0.0)
     plant.RegisterAsSourceForSceneGraph(scene_graph)
-    Parser(plant).AddModels(str(models_dir() / "apollo.sdf"))
+    # Your own Parser code works as well; add_robot also adds the config's frames.
+    add_robot(plant, robot.config)
     for name, size, xyz in (("floor", (6, 6, 0.02), (1, 0, -0.01)),
                             ("table", (0.8, 1.4, 0.04), (1.05, 0, 0.35))):
         plant.RegisterVisualGeometry(plant.world_body(), RigidTransform(np.array(xyz)),
@@ -118,7 +139,7 @@ def build(depth: str = "32F", duration_s: float = 4.0, seed: int = 0) -> Trackin
     plant.Finalize()
 
     # The robot moves along a trajectory; SceneGraph places its geometry there.
-    trajectory = sinusoid(plant, duration_s)
+    trajectory = sinusoid(plant, robot, duration_s)
     motion = builder.AddSystem(TrajectorySource(trajectory))
     to_pose = builder.AddSystem(MultibodyPositionToGeometryPose(plant))
     builder.Connect(motion.get_output_port(), to_pose.get_input_port())
@@ -126,7 +147,7 @@ def build(depth: str = "32F", duration_s: float = 4.0, seed: int = 0) -> Trackin
                     scene_graph.get_source_pose_port(plant.get_source_id()))
 
     # A stock RgbdSensor on the head, sampled at 30 Hz with its capture time.
-    nominal = plant.GetFrameByName("camera_optical")
+    nominal = plant.GetFrameByName(robot.config.camera_frame)
     camera = DepthRenderCamera(
         RenderCameraCore("vtk", CameraInfo(320, 240, np.radians(45.0)),
                          ClippingRange(0.1, 6.0), RigidTransform()),
@@ -140,20 +161,20 @@ def build(depth: str = "32F", duration_s: float = 4.0, seed: int = 0) -> Trackin
     stamper = AddImageStamper(builder, image_port, period_s=1.0 / 30.0)
 
     # Encoders at 1 kHz with a constant 8.6 deg bias on the arm joints.
-    model = build_tracker_model(RobotConfig("apollo.sdf", camera_frame="camera_optical",
-                                            end_effector_frame="end_effector"))
+    model = build_tracker_model(robot.config)
     config = EncoderConfig(rate_hz=1000.0, bias="constant", constant_bias_deg=8.6)
-    encoders = builder.AddSystem(BiasedEncoders(model.robot_joint_names, config, seed, ARM))
+    encoders = builder.AddSystem(BiasedEncoders(model.robot_joint_names, config, seed,
+                                                 robot.biased))
     builder.Connect(motion.get_output_port(), encoders.get_input_port(0))
 
     tracker = AddTracker(builder, model, sensor.default_depth_render_camera(),
-                         TrackerParams(),
+                         params or TrackerParams(),
                          measured_position=encoders.GetOutputPort("measured_position"),
                          measurement_time=encoders.GetOutputPort("measurement_time"),
                          depth=stamper.GetOutputPort("image"),
                          image_time=stamper.GetOutputPort("image_time"),
                          encoder_period_s=1.0 / config.rate_hz)
-    return TrackingDemo(builder.Build(), tracker, plant, trajectory, encoders)
+    return TrackingDemo(builder.Build(), tracker, plant, trajectory, encoders, robot.config)
 
 
 def hand_errors_mm(demo: TrackingDemo, times_s: np.ndarray) -> dict[str, np.ndarray]:
