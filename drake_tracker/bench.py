@@ -1,20 +1,20 @@
 """``drake-tracker bench``: throughput of the tracker's hot paths on this machine.
 
-All figures come from one process and one run, so ratios (batched renderer vs Drake's
-RenderEngine) compare the same frames under the same load. Timings are medians over
-repetitions after a warm-up (numba compilation excluded).
+All figures come from one process and one run, so ratios (CAD robot vs bench robot,
+batched vs Drake's RenderEngineVtk) compare the same frames under the same load. Times
+are the least of several repetitions after a warm-up (numba compilation excluded).
 
 Keys of ``bench.json``:
 
-* ``image_updates_per_s_2000``: full CPF image updates per second at 2000 likelihood
-  evaluations per image (particles x blocks, as dbrt counts ``sample_count``, times the
-  annealing layers), 80x60, Apollo's 7 arm + 2 head joints + 6 virtual joints (15
-  blocks);
-* ``image_updates_per_s_default``: the same with the default parameters;
-* ``stage_ms_2000``: per image update at 2000 evaluations: ``fk``, ``render`` and
-  ``likelihood`` measured as separate passes, ``fused`` (what the filter runs: the three
-  in one kernel), ``resampling`` and ``filter_other`` (the rest of the CPF);
-* ``renderer_speedup_vs_drake``: Drake RenderEngineVtk per image / batched per image;
+* ``robots``: per robot, the bench robot ``apollo`` (Drake primitives) and ``apollo_cad``
+  (the same robot with CAD-like OBJ meshes, 54,720 triangles, generated on the fly), the
+  figures of :mod:`drake_tracker.bench_likelihood`: image updates/s at about 2000
+  evaluations with 1 and 2 numba threads, µs per evaluation by stage, the CPF's Python
+  time per block call, Drake RenderEngineVtk's time per image and its ratios, agreement
+  with it, triangle counts;
+* ``image_updates_per_s_2000_1_thread`` / ``..._2_threads``: the bench robot's;
+* ``cad_over_bench_cost_per_evaluation``: fused evaluation cost, CAD robot / bench robot;
+* ``image_updates_per_s_default``: the bench robot with the default parameters;
 * ``kf_step_us``: one predict+update of the whole bank (15 joints);
 * ``replay_us_per_reading``: re-filtering one buffered reading after a delayed image.
 """
@@ -30,74 +30,24 @@ import numpy as np
 
 from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.cpf import normalized_weights, systematic_resample
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import VAR_A, JointKalmanBank, initial_moments
-from drake_tracker.core.likelihood import log_likelihoods
-from drake_tracker.core.renderer import benchmark_renderers, default_view_configuration
 from drake_tracker.params import TrackerParams, resolve_blocks, resolve_kalman_params
 from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.tracker import camera_chain_joints
 
 
-def _median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
-
-
-def _test_image(model, camera: CameraIntrinsics) -> np.ndarray:
-    from drake_tracker.core.renderer import make_renderer
-
-    image = make_renderer(model, camera, "batched").render(
-        default_view_configuration(model)[None])[0]
-    return np.where(np.isfinite(image), image, 2.5).astype(np.float32)
-
-
 def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,
                        num_particles: int, repeats: int) -> dict:
     """Times whole CPF image updates with ``num_particles`` per block."""
+    from drake_tracker.bench_likelihood import test_observation, time_updates, tracking_prior
+
     blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
     update = CpfImageUpdate(model, camera, blocks, num_particles, params.image.likelihood,
                             params.image.image_width_px, params.image.max_kl,
                             annealing_betas=tuple(params.image.annealing_betas))
-    observation = update.prepare(_test_image(model, camera))
-    std = np.full(model.num_joints, np.radians(1.0))
-    std[model.virtual_joint_indices] = 0.005
-    prior = initial_moments(default_view_configuration(model), std, std,
-                            np.ones(model.num_joints, bool))
-    rng = np.random.default_rng(0)
-    update(prior, observation, rng)  # warm-up
-    seconds = _median_time(lambda: update(prior, observation, rng), repeats)
-    return {"evaluations": update.evaluations_per_image, "seconds": seconds,
-            "updates_per_s": 1.0 / seconds, "update": update, "observation": observation}
-
-
-def bench_stages(update: CpfImageUpdate, observation, repeats: int) -> dict:
-    """Per-image-update stage times (ms) for the update's evaluation count."""
-    model = update.model
-    n_eval = update.evaluations_per_image
-    rng = np.random.default_rng(1)
-    q = default_view_configuration(model) + rng.normal(0, 0.01, (n_eval, model.num_joints))
-    renderer = update.renderer
-    kinematics = getattr(renderer, "kinematics", None)
-    out = {}
-    if kinematics is not None:
-        out["fk"] = 1e3 * _median_time(lambda: kinematics.body_poses(q), repeats)
-    rendered = renderer.render(q)
-    out["render"] = 1e3 * _median_time(lambda: renderer.render(q), repeats)
-    log_likelihoods(rendered, observation, update.likelihood)
-    out["likelihood"] = 1e3 * _median_time(
-        lambda: log_likelihoods(rendered, observation, update.likelihood), repeats)
-    out["fused"] = 1e3 * _median_time(
-        lambda: update.log_likelihood(q, observation), repeats)
-    weights = normalized_weights(rng.normal(0, 5, update.num_particles))
-    per_block = _median_time(lambda: systematic_resample(weights, rng), 20 * repeats)
-    out["resampling"] = 1e3 * per_block * len(update.blocks) * len(update.annealing_betas)
-    return out
+    timed = time_updates(update, test_observation(update), tracking_prior(model), repeats)
+    return {"evaluations": update.evaluations_per_image, **timed}
 
 
 def bench_kalman(model, params: TrackerParams, repeats: int = 20000) -> dict:
@@ -129,55 +79,84 @@ def bench_kalman(model, params: TrackerParams, repeats: int = 20000) -> dict:
 
 
 def run_benchmarks(quick: bool = False) -> dict:
-    model = build_tracker_model(robot_preset("apollo"))
+    """All figures of ``bench.json`` (see the module docstring)."""
+    from drake_tracker.bench_likelihood import bench_robot
+    from drake_tracker.hires_robot import BENCH_TESSELLATION, hires_apollo_model
+
     camera = CameraIntrinsics.from_fov(640, 480, np.radians(45.0))
     params = TrackerParams()
     repeats = 3 if quick else 7
-    num_blocks = len(resolve_blocks(params, model.joint_names, camera_chain_joints(model)))
-    layers = len(params.image.annealing_betas)
-    particles_2000 = int(np.ceil(2000 / (num_blocks * layers)))
-    at_2000 = bench_image_update(model, camera, params, particles_2000, repeats)
-    default = bench_image_update(model, camera, params, params.image.num_particles, repeats)
-    stages = bench_stages(at_2000["update"], at_2000["observation"], repeats)
-    stages["filter_other"] = max(
-        0.0, 1e3 * at_2000["seconds"] - stages["fused"] - stages["resampling"])
-    small = camera.subsampled(at_2000["update"].stride)
-    renderers = benchmark_renderers(model, small, num_particles=2000, seed=0,
-                                    num_drake=30 if quick else 100)
-    kalman = bench_kalman(model, params)
+    num_drake = 10 if quick else 50
+    apollo = build_tracker_model(robot_preset("apollo"))
+    robots = {"apollo": apollo, "apollo_cad": hires_apollo_model(**BENCH_TESSELLATION)}
+    results = {name: bench_robot(model, camera, params, repeats, num_drake)
+               for name, model in robots.items()}
+    default = bench_image_update(apollo, camera, params, params.image.num_particles,
+                                 repeats)
+    kalman = bench_kalman(apollo, params)
+    bench, cad = results["apollo"], results["apollo_cad"]
+    size = camera.subsampled(bench_stride(camera, params))
     return {
         "machine": {"processor": platform.processor() or platform.machine(),
-                    "python": platform.python_version()},
-        "image_size": [small.width, small.height],
-        "num_joints": model.num_joints,
-        "num_blocks": num_blocks,
-        "annealing_layers": layers,
-        "image_updates_per_s_2000": at_2000["updates_per_s"],
-        "evaluations_2000": at_2000["evaluations"],
+                    "python": platform.python_version(),
+                    "numba_threading_layer": _threading_layer()},
+        "image_size": [size.width, size.height],
+        "robots": results,
+        "image_updates_per_s_2000_1_thread": bench["threads"]["1"]["updates_per_s"],
+        "image_updates_per_s_2000_2_threads": bench["threads"]["2"]["updates_per_s"],
+        "cad_over_bench_cost_per_evaluation": (cad["stage_us_per_evaluation"]["score"]
+                                               / bench["stage_us_per_evaluation"]["score"]),
         "image_updates_per_s_default": default["updates_per_s"],
         "evaluations_default": default["evaluations"],
-        "stage_ms_2000": stages,
-        "renderer_speedup_vs_drake": renderers["renderer_speedup_vs_drake"],
-        "batched_us_per_image": renderers["batched_us_per_image"],
-        "drake_us_per_image": renderers["drake_us_per_image"],
         "kf_step_us": kalman["kf_step_us"],
         "replay_us_per_reading": kalman["replay_us_per_reading"],
     }
 
 
+def bench_stride(camera: CameraIntrinsics, params: TrackerParams) -> int:
+    """The subsampling stride of the image update at the default image width."""
+    from drake_tracker.core.camera import stride_for_width
+
+    return stride_for_width(camera.width, params.image.image_width_px)
+
+
+def _threading_layer() -> str:
+    import numba
+
+    try:
+        return str(numba.threading_layer())
+    except ValueError:  # no parallel kernel has run yet
+        return str(numba.config.THREADING_LAYER)
+
+
 def format_bench(result: dict) -> str:
-    lines = [
-        f"image size {result['image_size'][0]}x{result['image_size'][1]}, "
-        f"{result['num_joints']} joints, {result['num_blocks']} blocks",
-        f"image updates/s at {result['evaluations_2000']} evaluations: "
-        f"{result['image_updates_per_s_2000']:.2f}   (target >= 10)",
+    """A human-readable summary of ``bench.json``."""
+    w, h = result["image_size"]
+    lines = [f"image {w}x{h}, numba threading layer "
+             f"{result['machine']['numba_threading_layer']}"]
+    for name, r in result["robots"].items():
+        stages = r["stage_us_per_evaluation"]
+        threads = ", ".join(f"{t} thread{'s' if t != '1' else ''} {v['updates_per_s']:.1f}"
+                            for t, v in r["threads"].items())
+        lines += [
+            f"{name}: {r['triangles_source']} triangles ({r['triangles_rendered']} rendered)",
+            f"  image updates/s at {r['evaluations']} evaluations: {threads}"
+            "   (target >= 30 on one thread)",
+            "  us per evaluation (1 thread): " + ", ".join(
+                f"{k} {v:.1f}" for k, v in stages.items()),
+            f"  CPF Python outside the kernel: {r['threads']['1']['python_us_per_block']:.0f}"
+            f" us per block call x {r['block_calls_per_update']}",
+            f"  Drake RenderEngineVtk {r['drake_us_per_image']:.0f} us per image: "
+            f"{r['drake_over_score']:.0f}x a fused evaluation, "
+            f"{r['drake_over_render']:.0f}x a batched render; agreement: labels "
+            f"{100 * r['label_agreement_vs_drake']:.2f} %, depth median "
+            f"{r['depth_median_mm_vs_drake']:.2f} mm, p95 {r['depth_p95_mm_vs_drake']:.2f} mm",
+        ]
+    lines += [
+        f"CAD robot / bench robot cost per evaluation: "
+        f"{result['cad_over_bench_cost_per_evaluation']:.2f}   (target <= 2)",
         f"image updates/s, defaults ({result['evaluations_default']} evaluations): "
         f"{result['image_updates_per_s_default']:.2f}",
-        "stage ms per update at 2000 evaluations: " + ", ".join(
-            f"{k} {v:.1f}" for k, v in result["stage_ms_2000"].items()),
-        f"renderer: batched {result['batched_us_per_image']:.1f} us/image, Drake "
-        f"{result['drake_us_per_image']:.0f} us/image, speedup "
-        f"{result['renderer_speedup_vs_drake']:.1f}x   (target >= 50)",
         f"Kalman bank step: {result['kf_step_us']:.2f} us   (target <= 20)",
         f"replay: {result['replay_us_per_reading']:.2f} us per re-filtered reading",
     ]

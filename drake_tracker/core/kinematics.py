@@ -14,6 +14,8 @@ import numpy as np
 from numba import njit, prange
 from pydrake.multibody.tree import BodyIndex, JointIndex
 
+import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
+
 _REVOLUTE, _PRISMATIC, _WELD = 0, 1, 2
 _SUPPORTED = {"revolute": _REVOLUTE, "prismatic": _PRISMATIC, "weld": _WELD}
 
@@ -137,6 +139,36 @@ def _body_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev, out
         _body_poses_one(out[n], n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
 
 
+@njit(cache=True)
+def relative_poses_one(n, q, kind, inboard, outboard, q_index, axis, A, B, rev, frame_body,
+                       X_BF, X, Y, T, M):
+    """Y[b] = inv(X_W_body(frame_body) @ X_BF) @ X_WB[b] for particle n of q: the poses of
+    all bodies in frame A (fixed at X_BF on body ``frame_body``). ``X`` (num_bodies, 4, 4)
+    and ``T``, ``M`` (4, 4) are scratch; ``Y`` (num_bodies, 4, 4) the output."""
+    nb = Y.shape[0]
+    _body_poses_one(X, n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
+    # M = X_WA = X[frame_body] @ X_BF, then T = inv(X_WA) (rigid).
+    f = frame_body
+    for r in range(3):
+        for c in range(4):
+            M[r, c] = (X[f, r, 0] * X_BF[0, c] + X[f, r, 1] * X_BF[1, c]
+                       + X[f, r, 2] * X_BF[2, c])
+        M[r, 3] += X[f, r, 3]
+    for r in range(3):
+        for c in range(3):
+            T[r, c] = M[c, r]
+        T[r, 3] = -(M[0, r] * M[0, 3] + M[1, r] * M[1, 3] + M[2, r] * M[2, 3])
+    for b in range(nb):
+        for r in range(3):
+            for c in range(4):
+                Y[b, r, c] = T[r, 0] * X[b, 0, c] + T[r, 1] * X[b, 1, c] + T[r, 2] * X[b, 2, c]
+            Y[b, r, 3] += T[r, 3]
+        Y[b, 3, 0] = 0.0
+        Y[b, 3, 1] = 0.0
+        Y[b, 3, 2] = 0.0
+        Y[b, 3, 3] = 1.0
+
+
 @njit(parallel=True, cache=True)
 def _relative_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev,
                            frame_body, X_BF, out):
@@ -146,28 +178,8 @@ def _relative_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev,
         T = np.empty((4, 4))
         M = np.empty((4, 4))
         X = np.empty((nb, 4, 4))
-        _body_poses_one(X, n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
-        # M = X_WA = X[frame_body] @ X_BF, then T = inv(X_WA) (rigid).
-        f = frame_body
-        for r in range(3):
-            for c in range(4):
-                M[r, c] = (X[f, r, 0] * X_BF[0, c] + X[f, r, 1] * X_BF[1, c]
-                           + X[f, r, 2] * X_BF[2, c])
-            M[r, 3] += X[f, r, 3]
-        for r in range(3):
-            for c in range(3):
-                T[r, c] = M[c, r]
-            T[r, 3] = -(M[0, r] * M[0, 3] + M[1, r] * M[1, 3] + M[2, r] * M[2, 3])
-        Y = out[n]
-        for b in range(nb):
-            for r in range(3):
-                for c in range(4):
-                    Y[b, r, c] = T[r, 0] * X[b, 0, c] + T[r, 1] * X[b, 1, c] + T[r, 2] * X[b, 2, c]
-                Y[b, r, 3] += T[r, 3]
-            Y[b, 3, 0] = 0.0
-            Y[b, 3, 1] = 0.0
-            Y[b, 3, 2] = 0.0
-            Y[b, 3, 3] = 1.0
+        relative_poses_one(n, q, kind, inboard, outboard, q_index, axis, A, B, rev,
+                           frame_body, X_BF, X, out[n], T, M)
 
 
 class BatchedKinematics:
@@ -298,6 +310,17 @@ class BatchedKinematics:
         """World pose X_WF of a plant Frame (body or fixed-offset frame), (N, 4, 4)."""
         X_WB = self.body_poses(q)[:, int(frame.body().index())]
         return X_WB @ _to4(frame.GetFixedPoseInBodyFrame())
+
+    def frame_tables(self, frame_A) -> tuple:
+        """The arguments of :func:`relative_poses_one` after ``q``, for frame A: the
+        joint tables, A's body index and its fixed pose X_BF in that body."""
+        X_BF = np.ascontiguousarray(_to4(frame_A.GetFixedPoseInBodyFrame()))
+        return (*self._tables(), int(frame_A.body().index()), X_BF)
+
+    def checked_positions(self, q) -> np.ndarray:
+        """q as a C-contiguous (N, nq) float array; a ValueError for a wrong shape or
+        non-finite values."""
+        return np.ascontiguousarray(self._check_q(q))
 
     def relative_poses(self, q: np.ndarray, frame_A) -> np.ndarray:
         """Poses X_AB of all bodies in frame A, (N, num_bodies, 4, 4)."""

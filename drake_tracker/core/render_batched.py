@@ -66,6 +66,7 @@ class BatchedDepthRenderer:
             self.meshes = level_of_detail(self.source_meshes, detail.tolerance_m(intrinsics),
                                           detail.min_reduction)
         self._tables = render_tables(self.meshes, self.kinematics.num_bodies)
+        self._frame_tables = self.kinematics.frame_tables(model.camera_frame)
         k = intrinsics
         self._fx = float(k.fx)
         self._fy = float(k.fy)
@@ -92,8 +93,8 @@ class BatchedDepthRenderer:
         if tuple(observation.shape) != (k.height, k.width):
             raise ValueError(f"observation has shape {tuple(observation.shape)}, the "
                              f"renderer renders ({k.height}, {k.width})")
-        X_CB = self.kinematics.relative_poses(q, self.model.camera_frame)
-        return fused_scores(X_CB, self._tables, self._planes,
+        q = self.kinematics.checked_positions(q)
+        return fused_scores(q, self._frame_tables, self._tables, self._planes,
                             (self._fx, self._fy, self._cx, self._cy), self.near_m,
                             self.far_m, observation)
 

@@ -3,7 +3,8 @@
 :func:`fused_scores` gives the same numbers as
 ``likelihood.log_likelihoods(images, observation, params)`` for the images that
 :func:`~drake_tracker.core.rasterize.render_kernel` would render, without writing the
-(N, H, W) images to memory: each thread renders a particle into its own z-buffer, then
+(N, H, W) images (or the body poses) to memory: per particle, forward kinematics to the
+camera frame, then each thread renders the particle into its own z-buffer, then
 collects the (pixel, depth) pairs of the robot pixels that have a valid observation,
 visiting only the columns each row's triangles touched (and resetting them for the next
 particle), and scores that list in a branch-free loop (:func:`pixel_log_ratios`).
@@ -22,10 +23,12 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
+from drake_tracker.core.kinematics import relative_poses_one
 from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.core.rasterize import num_chunks, render_particle
 from drake_tracker.core.vector_math import exp_inplace, log_inplace
@@ -100,15 +103,22 @@ def pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff
         terms[i] -= log_p_occ_inf[slots[i]]
 
 
-@njit(parallel=True, cache=True)
-def _score_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
-                  sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
-                  planes, fx, fy, cx, cy, near, far, chunks, height, width,
-                  pixel_slot, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
-                  log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs, out):
-    N = X_CB.shape[0]
+def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame_body, X_BF,
+                     vertices, triangles, body_vertex_start, body_tri_start,
+                     sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
+                     planes, fx, fy, cx, cy, near, far, chunks, height, width,
+                     pixel_slot, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
+                     log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs, out):
+    """FK, rasterising and scoring of each configuration q[n] into out[n], in ``chunks``
+    contiguous chunks of particles (prange: parallel in the parallel compilation)."""
+    N = q.shape[0]
     V = vertices.shape[0]
+    nb = body_tri_start.shape[0] - 1
     for chunk in prange(chunks):
+        X = np.empty((nb, 4, 4))
+        X_CB = np.empty((nb, 4, 4))
+        T = np.empty((4, 4))
+        M = np.empty((4, 4))
         P = np.empty((V, 3))
         UV = np.empty((V, 3))
         poly = np.empty((4, 3))
@@ -122,9 +132,11 @@ def _score_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
         terms = np.empty(height * width)
         work = np.empty((4, height * width))
         for n in range(chunk * N // chunks, (chunk + 1) * N // chunks):
+            relative_poses_one(n, q, kind, inboard, outboard, q_index, axis, A, B, rev,
+                               frame_body, X_BF, X, X_CB, T, M)
             rows[0] = height
             rows[1] = -1
-            render_particle(zbuf, X_CB[n], vertices, triangles, body_vertex_start,
+            render_particle(zbuf, X_CB, vertices, triangles, body_vertex_start,
                             body_tri_start, sphere_center, sphere_radius, tri_normal,
                             tri_offset, tri_closed, planes, fx, fy, cx, cy, near, far,
                             P, UV, poly, rows, span)
@@ -154,22 +166,34 @@ def _score_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
             out[n] = total
 
 
-def fused_scores(X_CB: np.ndarray, render_tables: tuple, frustum_planes: np.ndarray,
-                 projection: tuple[float, float, float, float], near_m: float, far_m: float,
-                 observation: PreparedObservation) -> np.ndarray:
-    """(N,) log-likelihoods of the particles whose camera-frame body poses are ``X_CB``
-    (N, num_bodies, 4, 4), rendered with ``render_tables`` (from
-    :func:`~drake_tracker.core.rasterize.render_tables`), ``frustum_planes`` and
-    ``projection`` (fx, fy, cx, cy with the pixel-centre offset applied)."""
+#: The same kernel compiled twice: serial (one thread: no threading layer, no thread
+#: wake-ups, which cost milliseconds on a loaded machine) and parallel over chunks.
+_score_serial = njit(cache=True)(_score_particles)
+_score_parallel = njit(parallel=True, cache=True)(_score_particles)
+
+
+def fused_scores(q: np.ndarray, frame_tables: tuple, render_tables: tuple,
+                 frustum_planes: np.ndarray, projection: tuple[float, float, float, float],
+                 near_m: float, far_m: float, observation: PreparedObservation) -> np.ndarray:
+    """(N,) log-likelihoods of configurations q (N, nq), C-contiguous and checked: forward
+    kinematics to the camera frame (``frame_tables`` from
+    :meth:`~drake_tracker.core.kinematics.BatchedKinematics.frame_tables`), rendering
+    with ``render_tables`` (:func:`~drake_tracker.core.rasterize.render_tables`),
+    ``frustum_planes`` and ``projection`` (fx, fy, cx, cy with the pixel-centre offset
+    applied), and scoring, in one kernel call; serial when numba has one thread."""
     height, width = observation.shape
-    N = X_CB.shape[0]
+    N = q.shape[0]
     out = np.zeros(N)
     if N == 0 or observation.num_valid == 0:
         return out
     fx, fy, cx, cy = projection
     o = observation
-    _score_kernel(X_CB, *render_tables, frustum_planes, fx, fy, cx, cy, near_m, far_m,
-                  num_chunks(N), height, width, o.pixel_slot, o.z, o.inv_sigma,
-                  o.lam_sigma2, o.gauss_coeff, o.occ_coeff, o.log_p_occ_inf, o.uniform,
-                  o.occluder_rate_per_m, o.occlusion_probability, _ERFC_COEFFS, out)
+    chunks = num_chunks(N)
+    kernel = _score_parallel
+    if chunks == 1 or numba.get_num_threads() == 1:
+        kernel, chunks = _score_serial, 1
+    kernel(q, *frame_tables, *render_tables, frustum_planes, fx, fy, cx, cy, near_m, far_m,
+           chunks, height, width, o.pixel_slot, o.z, o.inv_sigma, o.lam_sigma2,
+           o.gauss_coeff, o.occ_coeff, o.log_p_occ_inf, o.uniform, o.occluder_rate_per_m,
+           o.occlusion_probability, _ERFC_COEFFS, out)
     return out

@@ -1,0 +1,185 @@
+"""The likelihood's part of ``drake-tracker bench``: one robot's image updates and stages.
+
+For one robot, at the bench's image size and about 2000 likelihood evaluations per image
+update (particles per block x blocks x annealing layers):
+
+* ``updates_per_s``: whole CPF image updates per second, per numba thread count;
+* ``python_us_per_block``: the part of an update spent outside the scoring kernel
+  (the CPF's Python: sampling, weights, resampling, moments), per block call;
+* ``stage_us_per_evaluation``: ``fk`` (batched forward kinematics), ``render`` (FK
+  excluded, images written to memory), ``score`` (what the filter runs: FK, rasterising and
+  the pixel likelihood fused), ``likelihood`` (score - fk - render, the pixel term and the
+  scan of the robot's pixels), all called with the CPF's batch size, one thread;
+* ``drake_us_per_image``: Drake's RenderEngineVtk on the same configurations (one
+  ``RenderDepthImage`` each, scoring excluded), and its ratio to ``score``;
+* agreement of the rendered images with Drake's (robot/background label, depth);
+* ``triangles``: as read from SceneGraph, and as rendered (the level of detail).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numba
+import numpy as np
+
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.image_update import CpfImageUpdate
+from drake_tracker.core.kalman import initial_moments
+from drake_tracker.core.renderer import (
+    default_view_configuration,
+    make_renderer,
+    random_configurations,
+)
+from drake_tracker.params import TrackerParams, resolve_blocks
+from drake_tracker.tracker import camera_chain_joints
+
+
+def _best_cpu_and_wall(fn, repeats: int) -> tuple[float, float]:
+    """(wall, cpu) seconds of ``fn()``, each the least of ``repeats`` runs."""
+    wall = cpu = np.inf
+    for _ in range(max(1, repeats)):
+        c0 = time.process_time()
+        t0 = time.perf_counter()
+        fn()
+        wall = min(wall, time.perf_counter() - t0)
+        cpu = min(cpu, time.process_time() - c0)
+    return float(wall), float(cpu)
+
+
+def _test_image(renderer, q: np.ndarray) -> np.ndarray:
+    """The robot at q in front of a wall at 2.5 m, 4 mm of noise (seeded)."""
+    depth = renderer.render(q[None])[0].astype(np.float64)
+    depth[~np.isfinite(depth)] = 2.5
+    depth += np.random.default_rng(0).normal(0.0, 0.004, depth.shape)
+    return depth.astype(np.float32)
+
+
+def make_update(model, camera: CameraIntrinsics, params: TrackerParams,
+                evaluations: int = 2000) -> CpfImageUpdate:
+    """The tracker's image update with particles per block set for ``evaluations``."""
+    blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
+    layers = len(params.image.annealing_betas)
+    particles = int(np.ceil(evaluations / (len(blocks) * layers)))
+    return CpfImageUpdate(model, camera, blocks, particles, params.image.likelihood,
+                          params.image.image_width_px, params.image.max_kl,
+                          annealing_betas=tuple(params.image.annealing_betas))
+
+
+def test_observation(update: CpfImageUpdate):
+    """The update's prepared observation of the robot at its view configuration in front
+    of a wall (rendered by the update's own renderer)."""
+    image = _test_image(update.renderer, default_view_configuration(update.model))
+    return update.prepare(_full_resolution(image, update.stride))
+
+
+def tracking_prior(model) -> np.ndarray:
+    """A prior at the view configuration: 1 deg per joint, 5 mm / rad per virtual joint."""
+    std = np.full(model.num_joints, np.radians(1.0))
+    std[model.virtual_joint_indices] = 0.005
+    return initial_moments(default_view_configuration(model), std, std,
+                           np.ones(model.num_joints, bool))
+
+
+def time_updates(update: CpfImageUpdate, observation, prior, repeats: int) -> dict:
+    """Best of ``repeats`` image updates: updates/s, and the time outside the kernel."""
+    rng = np.random.default_rng(0)
+    update(prior, observation, rng)  # warm-up (and compile)
+    totals, kernels = [], []
+    for _ in range(max(1, repeats)):
+        before = update.times.render_s
+        t0 = time.perf_counter()
+        update(prior, observation, rng)
+        totals.append(time.perf_counter() - t0)
+        kernels.append(update.times.render_s - before)
+    k = int(np.argmin(totals))
+    calls = len(update.blocks) * len(update.annealing_betas)
+    return {"updates_per_s": 1.0 / totals[k], "seconds": totals[k],
+            "python_us_per_block": 1e6 * (totals[k] - kernels[k]) / calls,
+            "kernel_ms": 1e3 * kernels[k]}
+
+
+def bench_robot(model, camera: CameraIntrinsics, params: TrackerParams, repeats: int = 5,
+                num_drake: int = 30, threads: tuple[int, ...] = (1, 2)) -> dict:
+    """The figures of the module docstring for one robot (``camera``: full resolution)."""
+    update = make_update(model, camera, params)
+    renderer = update.renderer
+    view = default_view_configuration(model)
+    observation = test_observation(update)
+    prior = tracking_prior(model)
+    previous = numba.get_num_threads()
+    per_threads = {}
+    try:
+        for t in threads:
+            numba.set_num_threads(min(t, numba.config.NUMBA_NUM_THREADS))
+            per_threads[str(t)] = time_updates(update, observation, prior, repeats)
+        numba.set_num_threads(1)
+        stages = _stages(renderer, observation, view, update.num_particles,
+                         update.evaluations_per_image, repeats)
+    finally:
+        numba.set_num_threads(previous)
+    drake = _against_drake(model, renderer, num_drake)
+    return {
+        "evaluations": update.evaluations_per_image,
+        "particles_per_block": update.num_particles,
+        "block_calls_per_update": len(update.blocks) * len(update.annealing_betas),
+        "threads": per_threads,
+        "stage_us_per_evaluation": stages,
+        "drake_us_per_image": drake["us_per_image"],
+        "drake_over_score": drake["us_per_image"] / stages["score"],
+        "drake_over_render": drake["us_per_image"] / stages["render"],
+        "label_agreement_vs_drake": drake["label_agreement"],
+        "depth_median_mm_vs_drake": drake["depth_median_mm"],
+        "depth_p95_mm_vs_drake": drake["depth_p95_mm"],
+        "triangles_source": renderer.source_meshes.num_triangles,
+        "triangles_rendered": renderer.num_triangles,
+    }
+
+
+def _full_resolution(image: np.ndarray, stride: int) -> np.ndarray:
+    """An image that subsamples (every ``stride``-th pixel) back to ``image``."""
+    return np.repeat(np.repeat(image, stride, axis=0), stride, axis=1)
+
+
+def _stages(renderer, observation, view, batch: int, evaluations: int, repeats: int) -> dict:
+    """µs per evaluation of each stage, called in batches of the CPF's size, 1 thread."""
+    q = random_configurations(renderer.model, evaluations, seed=1, spread_rad=0.02,
+                              center=view)
+    chunks = [q[i:i + batch] for i in range(0, len(q), batch)]
+    frame = renderer.model.camera_frame
+    poses = [renderer.kinematics.relative_poses(c, frame) for c in chunks]
+    renderer.score(chunks[0], observation)
+    renderer.render_camera_poses(poses[0])
+
+    def each(fn, items):
+        return lambda: [fn(x) for x in items]
+
+    fk = _best_cpu_and_wall(each(lambda c: renderer.kinematics.relative_poses(c, frame),
+                                 chunks), repeats)[1]
+    render = _best_cpu_and_wall(each(renderer.render_camera_poses, poses), repeats)[1]
+    score = _best_cpu_and_wall(each(lambda c: renderer.score(c, observation), chunks),
+                               repeats)[1]
+    us = 1e6 / evaluations
+    return {"fk": fk * us, "render": render * us, "score": score * us,
+            "likelihood": max(0.0, score - fk - render) * us}
+
+
+def _against_drake(model, renderer, num: int) -> dict:
+    """Drake's RenderEngineVtk per image on ``num`` configurations, and the agreement of
+    the two renderings (robot/background label, depth on shared robot pixels)."""
+    q = random_configurations(model, max(1, num), seed=3,
+                              center=default_view_configuration(model))
+    drake = make_renderer(model, renderer.intrinsics, "drake", renderer.near_m, renderer.far_m)
+    drake.render(q[:1])  # create the render window
+    t0 = time.perf_counter()
+    ref = drake.render(q)
+    us = 1e6 * (time.perf_counter() - t0) / len(q)
+    ours = renderer.render(q)
+    hit_ours, hit_ref = np.isfinite(ours), np.isfinite(ref)
+    both = hit_ours & hit_ref
+    diff = 1e3 * np.abs(ours[both].astype(float) - ref[both].astype(float))
+    return {"us_per_image": us,
+            "label_agreement": float(1.0 - (hit_ours ^ hit_ref).sum()
+                                     / max(1, (hit_ours | hit_ref).sum())),
+            "depth_median_mm": float(np.median(diff)) if diff.size else 0.0,
+            "depth_p95_mm": float(np.percentile(diff, 95)) if diff.size else 0.0}
