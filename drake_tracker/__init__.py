@@ -12,18 +12,13 @@ The public API (imported lazily, so ``import drake_tracker`` stays cheap)::
 
 import importlib
 
+from drake_tracker.systems import _PUBLIC as _SYSTEMS
+
 __version__ = "0.1.0"
 
-#: Public name -> module that defines it.
+#: Public name -> module that defines it: the systems, and the rest of the API.
 _PUBLIC = {
-    "AddTracker": "drake_tracker.systems.add_tracker",
-    "TrackerSystems": "drake_tracker.systems.add_tracker",
-    "JointKalmanBankSystem": "drake_tracker.systems.kalman_bank_system",
-    "DelayBufferSystem": "drake_tracker.systems.delay_buffer_system",
-    "CpfImageUpdateSystem": "drake_tracker.systems.cpf_system",
-    "DepthImageToFrame": "drake_tracker.systems.depth_image_adapter",
-    "ImageStamper": "drake_tracker.systems.depth_image_adapter",
-    "AddImageStamper": "drake_tracker.systems.depth_image_adapter",
+    **_SYSTEMS,
     "Tracker": "drake_tracker.tracker",
     "TrackerParams": "drake_tracker.params",
     "load_tracker_params": "drake_tracker.params",

@@ -196,6 +196,13 @@ def hand_errors_mm(demo: TrackingDemo, times_s: np.ndarray) -> dict[str, np.ndar
     return {key: np.array(value) for key, value in errors.items()}
 
 
+def print_errors(times_s: np.ndarray, errors: dict[str, np.ndarray]) -> None:
+    """Prints ``hand_errors_mm``'s result as a table."""
+    print("time (s)  tracker (mm)  encoders only (mm)")
+    for t, a, b in zip(times_s, errors["tracker"], errors["encoders_only"], strict=True):
+        print(f"{t:8.1f}  {a:12.1f}  {b:18.1f}")
+
+
 def main() -> None:
     """Builds the Diagram, simulates it, and prints the hand position errors."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -204,10 +211,7 @@ def main() -> None:
     args = parser.parse_args()
     demo = build(args.depth, args.duration)
     times = np.arange(0.5, args.duration + 1e-9, 0.5)
-    errors = hand_errors_mm(demo, times)
-    print("time (s)  tracker (mm)  encoders only (mm)")
-    for t, a, b in zip(times, errors["tracker"], errors["encoders_only"], strict=True):
-        print(f"{t:8.1f}  {a:12.1f}  {b:18.1f}")
+    print_errors(times, hand_errors_mm(demo, times))
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_dump_typed
-from track_in_your_diagram import RobotMotion, build, hand_errors_mm
+from track_in_your_diagram import RobotMotion, build, hand_errors_mm, print_errors
 
 from drake_tracker import (
     FrameOffset,
@@ -93,10 +93,7 @@ def main() -> None:
     params.image.annealing_betas = [0.03, 0.3, 1.0]
     demo = build("32F", args.duration, seed=0, robot=robot, params=params)
     times = np.arange(0.5, args.duration + 1e-9, 0.5)
-    errors = hand_errors_mm(demo, times)
-    print("time (s)  tracker (mm)  encoders only (mm)")
-    for t, a, b in zip(times, errors["tracker"], errors["encoders_only"], strict=True):
-        print(f"{t:8.1f}  {a:12.1f}  {b:18.1f}")
+    print_errors(times, hand_errors_mm(demo, times))
 
 
 if __name__ == "__main__":
