@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_tracker.core.health import HealthParams
 from drake_tracker.core.kalman import KalmanBankParams
 from drake_tracker.core.likelihood import LikelihoodParams
 from drake_tracker.robot import VIRTUAL_JOINT_NAMES
@@ -46,6 +47,13 @@ class JointNoise:
     bias_process_std_rad_per_sqrt_s: float = 0.02
     #: c: fraction of the bias that remains after one second, in (0, 1].
     bias_decay_per_s: float = 0.9
+    #: Expected bias jumps per second (a cable slipping, a gear skipping): the image
+    #: update's prior admits a step of ``bias_jump_std_rad`` with probability
+    #: 1 - exp(-rate * time since the previous image), so an image that shows one is
+    #: followed at once instead of at the pace of σb. 0 = the paper's Gaussian bias.
+    bias_jump_rate_per_s: float = 0.1
+    #: Standard deviation of a bias jump (rad).
+    bias_jump_std_rad: float = 0.15
     #: False: the joint is trusted (its bias is held at 0).
     has_bias: bool = True
     #: Prior standard deviations at the first reading (rad).
@@ -65,6 +73,7 @@ def _virtual_joint_noise() -> JointNoise:
         has_bias=True,
         initial_angle_std_rad=0.01,
         initial_bias_std_rad=0.01,
+        bias_jump_rate_per_s=0.0,
     )
 
 
@@ -108,6 +117,12 @@ class ImageParams:
     renderer: str = "batched"
     near_m: float = 0.1
     far_m: float = 6.0
+    #: Whether joints that move the camera (a pan-tilt head) may have bias jumps too
+    #: (``bias_jump_rate_per_s``). Off by default: a jump there turns the whole view, and
+    #: measured on s-head-arm with time-varying arm bias it let the filter "explain" a
+    #: misaligned arm by looking away from it (an unrendered robot scores 0 per pixel,
+    #: a misaligned one less): 300 mm from then on.
+    bias_jumps_in_camera_chain: bool = False
     #: Seed of the particle filter's random numbers (one stream per image sequence).
     seed: int = 0
     likelihood: LikelihoodParams = field(default_factory=LikelihoodParams)
@@ -119,6 +134,8 @@ class TrackerParams:
 
     kalman: KalmanConfig = field(default_factory=KalmanConfig)
     image: ImageParams = field(default_factory=ImageParams)
+    #: When the tracker reports ``tracking``, ``uncertain`` or ``lost``.
+    health: HealthParams = field(default_factory=HealthParams)
     #: Estimate the six virtual camera joints (False: the camera stays nominal).
     estimate_camera_offset: bool = True
     #: False: joint readings are ignored (the vision-only method); then the angles'
@@ -176,6 +193,10 @@ def validate_joint_noise(noise: JointNoise, where: str) -> None:
         _check(ok, f"{where}.{name}", value, "must be > 0 for a joint with bias")
     c = noise.bias_decay_per_s
     _check(0 < c <= 1, f"{where}.bias_decay_per_s", c, "c must be in (0, 1]")
+    for name in ("bias_jump_rate_per_s", "bias_jump_std_rad"):
+        value = getattr(noise, name)
+        _check(math.isfinite(value) and value >= 0, f"{where}.{name}", value,
+               "must be finite and >= 0")
 
 
 def validate_tracker_params(params: TrackerParams) -> None:
@@ -207,6 +228,7 @@ def validate_tracker_params(params: TrackerParams) -> None:
     _check(0 < im.near_m < im.far_m, "image.near_m/far_m", (im.near_m, im.far_m),
            "need 0 < near_m < far_m")
     im.likelihood.validate()
+    params.health.validate()
     _check(params.buffer_horizon_s > 0, "buffer_horizon_s", params.buffer_horizon_s,
            "must be > 0")
     _check(math.isfinite(params.max_interpolation_gap_s)

@@ -22,6 +22,12 @@ from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
 from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.health import (
+    ImageConsistency,
+    TrackerHealth,
+    image_consistency,
+    next_health,
+)
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import (
     MEAN_A,
@@ -32,6 +38,7 @@ from drake_tracker.core.kalman import (
     initial_moments,
 )
 from drake_tracker.core.kinematics import BatchedKinematics
+from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.params import (
     TrackerParams,
     joint_noise_for,
@@ -41,6 +48,9 @@ from drake_tracker.params import (
 )
 
 log = logging.getLogger(__name__)
+
+#: A bias jump is looked for over at most this much time since the previous image (s).
+MAX_JUMP_WINDOW_S = 1.0
 
 
 @dataclass
@@ -59,6 +69,9 @@ class TrackerEstimate:
     X_CE: np.ndarray
     #: The hand in the robot model's world frame.
     X_WE: np.ndarray
+    #: Whether the images agree with the estimate (``core/health.py``): a controller
+    #: should fall back to the encoders when ``health.state`` is ``HealthState.LOST``.
+    health: TrackerHealth = TrackerHealth()
 
 
 def image_rng(seed: int, sequence: int) -> np.random.Generator:
@@ -83,6 +96,15 @@ class PoseReadout:
         return X_CE, X_WE, X_WC
 
 
+@dataclass(frozen=True)
+class ImageOutcome:
+    """What one image update produced (all None for an image with no valid pixel)."""
+
+    observation: AngleObservation | None
+    result: CPFResult | None
+    consistency: ImageConsistency | None
+
+
 class ImageProcessor:
     """Turns a depth frame and the prior at its time into a pseudo-observation.
 
@@ -93,7 +115,14 @@ class ImageProcessor:
     def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams):
         self.params = params
         im = params.image
-        blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
+        chain = camera_chain_joints(model)
+        blocks = resolve_blocks(params, model.joint_names, chain)
+        noise = joint_noise_for(params, model.joint_names)
+        biased = np.array([j.has_bias for j in noise])
+        if not im.bias_jumps_in_camera_chain:
+            biased &= np.array([name not in chain for name in model.joint_names])
+        self._jump_rate = np.where(biased, [j.bias_jump_rate_per_s for j in noise], 0.0)
+        self._jump_std = np.array([j.bias_jump_std_rad for j in noise])
         self.update = CpfImageUpdate(
             model, camera, blocks, im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
@@ -121,19 +150,41 @@ class ImageProcessor:
         base = previous_due_s if np.isfinite(previous_due_s) else image_time_s
         return max(base + interval, image_time_s + 0.5 * interval)
 
-    def observe(self, frame: DepthFrame, prior: np.ndarray
-                ) -> tuple[AngleObservation | None, CPFResult | None]:
-        """The image's observation relative to ``prior`` (None if it has no valid pixel)."""
+    def jump_probability(self, elapsed_s: float) -> np.ndarray:
+        """(n,) probability that each joint's bias jumped within ``elapsed_s`` (the time
+        since the previous applied image; at most ``MAX_JUMP_WINDOW_S``)."""
+        window = min(max(float(elapsed_s), 0.0), MAX_JUMP_WINDOW_S)
+        return -np.expm1(-self._jump_rate * window)
+
+    def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf
+                ) -> ImageOutcome:
+        """The image's observation relative to ``prior`` (None if it has no valid pixel),
+        and its consistency with the estimate; ``elapsed_s`` is the time since the
+        previous applied image."""
         observation = self.update.prepare(frame.depth_m)
-        result = self.update(prior, observation, image_rng(self.params.image.seed,
-                                                           frame.sequence))
+        result = self.update(prior, observation,
+                             image_rng(self.params.image.seed, frame.sequence),
+                             self.jump_probability(elapsed_s), self._jump_std)
         if result is None:
-            return None, None
+            return ImageOutcome(None, None, None)
         # A degenerate particle set would claim certainty; floor the posterior variance
         # at the Monte-Carlo resolution of the prior.
         floor = np.maximum(prior[VAR_A] / self.update.num_particles, 1e-14)
         variance = np.maximum(result.variance, floor)
-        return AngleObservation.from_posterior(prior, result.mean, variance), result
+        return ImageOutcome(AngleObservation.from_posterior(prior, result.mean, variance),
+                            result, self.consistency(self.image_time(frame), result.mean,
+                                                     observation))
+
+    def consistency(self, time_s: float, q: np.ndarray, observation: PreparedObservation
+                    ) -> ImageConsistency:
+        """How the image (prepared) agrees with the robot rendered at configuration q."""
+        intrinsics = self.update.intrinsics
+        observed = np.full(intrinsics.height * intrinsics.width, np.nan)
+        observed[observation.pixel_index] = observation.z
+        rendered = self.update.renderer.render(np.atleast_2d(q))[0]
+        return image_consistency(time_s, rendered,
+                                 observed.reshape(intrinsics.height, intrinsics.width),
+                                 self.params.image.likelihood)
 
 
 def make_bank_and_prior(model, params: TrackerParams, first_reading: np.ndarray | None
@@ -232,6 +283,9 @@ class Tracker:
         self.buffer: BeliefBuffer | None = None
         #: Images stamped before this are not due yet (``ImageProcessor.next_due``).
         self.next_image_due_s = -np.inf
+        self.last_applied_image_s = -np.inf
+        #: Updated after every applied image (``core/health.py``).
+        self.health = TrackerHealth()
         self.last_result: CPFResult | None = None
         self.num_images_applied = 0
         self.num_images_skipped = 0
@@ -285,13 +339,16 @@ class Tracker:
             self.num_images_skipped += 1
             return False
         anchor = self.buffer.image_anchor(t)
-        observation, result = self.images.observe(frame, anchor.prior)
+        outcome = self.images.observe(frame, anchor.prior, t - self.last_applied_image_s)
         self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
-        self.last_result = result
-        if observation is None:
+        self.last_result = outcome.result
+        if outcome.observation is None:
+            log.warning("image %d skipped: no valid depth pixel", frame.sequence)
             self.num_images_skipped += 1
             return False
-        self.buffer.add_image_observation(anchor, observation)
+        self.health = next_health(self.health, outcome.consistency, self.params.health)
+        self.buffer.add_image_observation(anchor, outcome.observation)
+        self.last_applied_image_s = t
         self.num_images_applied += 1
         return True
 
@@ -304,4 +361,6 @@ class Tracker:
         if self.buffer is None:
             raise RuntimeError("the tracker has no estimate before its first joint reading")
         t, belief = self.buffer.present()
-        return estimate_from_belief(self.model, self.readout, t, belief)
+        estimate = estimate_from_belief(self.model, self.readout, t, belief)
+        estimate.health = self.health
+        return estimate

@@ -1,12 +1,18 @@
 """The Coordinate Particle Filter image update and moment matching (paper §IV-B).
 
-Particles start at the prior mean. For each block of coordinates in turn, fresh
-standard-normal noise is drawn for that block only (earlier blocks keep theirs), every
-particle is recomputed as ``prior mean + prior std * noise``, all particles are scored
+Particles start at the prior mean. For each block of coordinates in turn, that block
+alone is sampled afresh (earlier blocks keep their values), all particles are scored
 together, and the change of log-likelihood since the previous block is added to the log
 weights. When the weights degenerate, ``KL(w || uniform) = log N - H(w) > max_kl``, the
-particles are resampled (systematic resampling); children inherit their parent's noise
+particles are resampled (systematic resampling); children inherit their parent's values
 and likelihood. Finally a Gaussian per joint is moment-matched to the weighted particles.
+
+Each coordinate's prior may admit a *jump*: with probability ``jump_probability`` it is
+``N(mean, std² + jump_std²)`` instead of ``N(mean, std²)`` (a bias that stepped since the
+last image). Sampling from a proposal that is not the prior (a jump-heavy mixture, or a
+Gaussian placed by an earlier annealing sweep) adds the importance ratio
+``prior(x) / proposal(x)`` of each sampled block to the weights, so the weighted particles
+always estimate prior x likelihood.
 """
 
 from __future__ import annotations
@@ -59,14 +65,60 @@ def weighted_moments(samples: np.ndarray, weights: np.ndarray) -> tuple[np.ndarr
     return mean, variance
 
 
-def _gaussian_log_ratio(noise: np.ndarray, target_over_proposal_std: np.ndarray,
-                        offset: np.ndarray) -> np.ndarray:
-    """log N(x; μ, s) - log N(x; m, s_p) for x = m + s_p·ε, per particle, summed over the
-    block's coordinates: ``noise`` is ε (N, k), ``target_over_proposal_std`` is s/s_p and
-    ``offset`` is (m - μ)/s_p, both (k,)."""
-    z_target = (offset + noise) / target_over_proposal_std
-    return np.sum(0.5 * np.square(noise) - 0.5 * np.square(z_target)
-                  - np.log(target_over_proposal_std), axis=1)
+def _log_normal(x: np.ndarray, mean: np.ndarray, var: np.ndarray) -> np.ndarray:
+    return -0.5 * (np.square(x - mean) / var + np.log(2.0 * np.pi * var))
+
+
+@dataclass(frozen=True)
+class CoordinateMixture:
+    """Per coordinate: ``(1 - p) N(mean, std²) + p N(mean, std² + jump_std²)``, all (n,)."""
+
+    mean: np.ndarray
+    std: np.ndarray
+    jump_probability: np.ndarray
+    jump_std: np.ndarray
+
+    @staticmethod
+    def gaussian(mean: np.ndarray, std: np.ndarray) -> CoordinateMixture:
+        """A plain Gaussian (no jump component)."""
+        zero = np.zeros_like(np.asarray(mean, float))
+        return CoordinateMixture(np.asarray(mean, float), np.asarray(std, float), zero, zero)
+
+    @property
+    def has_jumps(self) -> bool:
+        return bool(np.any((self.jump_probability > 0) & (self.jump_std > 0)))
+
+    def sample(self, block: np.ndarray, num: int, rng: np.random.Generator) -> np.ndarray:
+        """(num, len(block)) draws of the block's coordinates."""
+        noise = rng.standard_normal((num, len(block)))
+        std = self.std[block]
+        if self.has_jumps:
+            jumped = rng.random((num, len(block))) < self.jump_probability[block]
+            std = np.where(jumped, np.sqrt(std**2 + self.jump_std[block] ** 2), std)
+        return self.mean[block] + std * noise
+
+    def log_density(self, x: np.ndarray, block: np.ndarray) -> np.ndarray:
+        """(num,) log density of the block's values x (num, len(block)), summed over it;
+        coordinates without spread contribute 0."""
+        mean, std = self.mean[block], self.std[block]
+        spread = std > 0
+        var = np.where(spread, std**2, 1.0)
+        log_p = _log_normal(x, mean, var)
+        p_jump, jump_var = self.jump_probability[block], self.jump_std[block] ** 2
+        if np.any(p_jump > 0):
+            with np.errstate(divide="ignore"):
+                log_p = np.logaddexp(np.log1p(-p_jump) + log_p,
+                                     np.log(p_jump) + _log_normal(x, mean, var + jump_var))
+        return np.sum(np.where(spread, log_p, 0.0), axis=1)
+
+    def check(self, n: int, what: str) -> None:
+        for name in ("mean", "std", "jump_probability", "jump_std"):
+            value = np.asarray(getattr(self, name), float)
+            if value.shape != (n,) or not np.all(np.isfinite(value)):
+                raise ValueError(f"{what} {name} must be finite with shape ({n},)")
+        if np.any(self.std < 0) or np.any(self.jump_std < 0) or np.any(
+                (self.jump_probability < 0) | (self.jump_probability >= 1)):
+            raise ValueError(f"{what}: std >= 0, jump_std >= 0, jump_probability in [0, 1)")
 
 
 def coordinate_particle_filter(
@@ -77,18 +129,18 @@ def coordinate_particle_filter(
     log_likelihood: Callable[[np.ndarray], np.ndarray],
     rng: np.random.Generator,
     max_kl: float = 2.0,
-    proposal_mean: np.ndarray | None = None,
-    proposal_std: np.ndarray | None = None,
+    prior: CoordinateMixture | None = None,
+    proposal: CoordinateMixture | None = None,
 ) -> CPFResult:
     """Runs the CPF; ``log_likelihood`` maps (N, n) configurations to (N,) log-likelihoods.
 
-    The particles target prior x likelihood. By default they are drawn from the prior
-    itself (the paper's CPF). With a ``proposal_mean``/``proposal_std`` they are drawn from
-    that Gaussian instead, and each block's weights gain the importance ratio
-    ``prior(x_block) / proposal(x_block)``: the result still estimates prior x likelihood
-    (importance sampling), whatever the proposal, as long as it covers the posterior.
-    Coordinates not yet sampled sit at the proposal mean. Coordinates in no block keep their
-    prior marginal (mean and variance unchanged).
+    The particles target prior x likelihood, the prior being ``N(prior_mean, prior_std²)``
+    or, when given, the mixture ``prior`` (whose mean and std must be ``prior_mean`` and
+    ``prior_std``). They are drawn from the prior itself (the paper's CPF) unless a
+    ``proposal`` is given; then each block's weights gain ``prior(x_block) /
+    proposal(x_block)``, and the result still estimates prior x likelihood (importance
+    sampling) wherever the proposal covers the posterior. Coordinates not yet sampled sit
+    at the proposal's mean. Coordinates in no block keep their prior marginal.
     """
     prior_mean = np.asarray(prior_mean, float)
     prior_std = np.asarray(prior_std, float)
@@ -97,44 +149,38 @@ def coordinate_particle_filter(
         raise ValueError("prior_std must be finite, non-negative and match prior_mean")
     if num_particles < 1:
         raise ValueError(f"num_particles must be >= 1, got {num_particles}")
-    center = prior_mean if proposal_mean is None else np.asarray(proposal_mean, float)
-    spread = prior_std if proposal_std is None else np.asarray(proposal_std, float)
-    if center.shape != (n,) or spread.shape != (n,) or not np.all(np.isfinite(center)) or \
-            not np.all(np.isfinite(spread)) or np.any(spread < 0):
-        raise ValueError("proposal mean/std must be finite, std >= 0, and match prior_mean")
-    importance = proposal_mean is not None or proposal_std is not None
-    # Where the prior has no spread the proposal may have none either (no ratio there).
-    safe_spread = np.where(spread > 0, spread, 1.0)
-    std_ratio = np.where(spread > 0, prior_std / safe_spread, 1.0)
-    offset = np.where(spread > 0, (center - prior_mean) / safe_spread, 0.0)
-    if importance and np.any((spread > 0) & (prior_std <= 0)):
-        raise ValueError("a proposal with spread where the prior has none")
-    noise = np.zeros((num_particles, n))
+    prior = prior if prior is not None else CoordinateMixture.gaussian(prior_mean, prior_std)
+    prior.check(n, "CPF prior")
+    if not (np.array_equal(prior.mean, prior_mean) and np.array_equal(prior.std, prior_std)):
+        raise ValueError("the CPF prior mixture's mean and std must be prior_mean, prior_std")
+    importance = proposal is not None or prior.has_jumps
+    proposal = proposal if proposal is not None else prior
+    proposal.check(n, "CPF proposal")
+    samples = np.tile(proposal.mean, (num_particles, 1))
     log_weights = np.zeros(num_particles)
     previous = np.zeros(num_particles)
     resamples = 0
     evaluations = 0
     block_max = []
     for block in blocks:
-        noise[:, block] = rng.standard_normal((num_particles, len(block)))
-        samples = center + spread * noise
+        values = proposal.sample(block, num_particles, rng)
+        samples[:, block] = values
         current = np.asarray(log_likelihood(samples), float)
         evaluations += num_particles
         if current.shape != (num_particles,) or not np.all(np.isfinite(current)):
             raise FloatingPointError("image log-likelihoods must be finite, one per particle")
         log_weights += current - previous
         if importance:
-            log_weights += _gaussian_log_ratio(noise[:, block], std_ratio[block], offset[block])
+            log_weights += prior.log_density(values, block) - proposal.log_density(values, block)
         previous = current
         block_max.append(float(current.max()))
         if kl_from_uniform(log_weights) > max_kl:
             children = systematic_resample(normalized_weights(log_weights), rng)
-            noise = noise[children]
+            samples = samples[children]
             previous = previous[children]
             log_weights = np.zeros(num_particles)
             resamples += 1
     weights = normalized_weights(log_weights)
-    samples = center + spread * noise
     mean, variance = weighted_moments(samples, weights)
     in_blocks = np.zeros(n, bool)
     for block in blocks:
@@ -162,11 +208,14 @@ def annealed_coordinate_particle_filter(
     max_kl: float = 2.0,
     betas: Sequence[float] = (1.0,),
     keep_std_fraction: float = 0.5,
+    jump_probability: np.ndarray | None = None,
+    jump_std: np.ndarray | None = None,
+    proposal_jump_fraction: float = 0.25,
 ) -> CPFResult:
     """CPF sweeps towards prior x likelihood^beta, for ``betas`` increasing to 1.
 
-    ``betas == (1,)`` is the paper's single sweep. With more, sweep k targets
-    ``prior x likelihood^beta_k`` by importance sampling (see
+    ``betas == (1,)`` without jumps is the paper's single sweep. With more, sweep k
+    targets ``prior x likelihood^beta_k`` by importance sampling (see
     :func:`coordinate_particle_filter`): the first sweep draws from the prior, each later
     one from a Gaussian at the previous sweep's moment-matched mean, with each
     coordinate's std the larger of its matched std and ``keep_std_fraction`` times the
@@ -175,6 +224,12 @@ def annealed_coordinate_particle_filter(
     likelihood^1 in the last sweep; the tempered sweeps only place its particles. (Weighting
     each sweep's ``likelihood^beta_k`` on top of the previous sweep's result would count
     the image sum(betas) times: 1.33 for the default schedule.)
+
+    With ``jump_probability``/``jump_std`` (n,), the prior admits a jump per coordinate
+    (see :class:`CoordinateMixture`), and every sweep's proposal draws the jump component
+    for ``max(jump_probability, proposal_jump_fraction)`` of the particles (where the
+    prior has one), so that a jump the image supports is found; importance weights keep
+    the answer that of the prior.
 
     Why sweep more than once: the pixel likelihood is so peaked that one sweep, sampling
     block after block while the later blocks sit at a prior mean several degrees off,
@@ -189,9 +244,18 @@ def annealed_coordinate_particle_filter(
                          f"got {betas}")
     if not 0 < keep_std_fraction <= 1:
         raise ValueError(f"keep_std_fraction must be in (0, 1], got {keep_std_fraction}")
+    if not 0 <= proposal_jump_fraction < 1:
+        raise ValueError(f"proposal_jump_fraction must be in [0, 1), got "
+                         f"{proposal_jump_fraction}")
     prior_mean = np.asarray(prior_mean, float)
     prior_std = np.asarray(prior_std, float)
-    mean, std = prior_mean, prior_std
+    zero = np.zeros_like(prior_mean)
+    p_jump = zero if jump_probability is None else np.asarray(jump_probability, float)
+    s_jump = zero if jump_std is None else np.asarray(jump_std, float)
+    prior = CoordinateMixture(prior_mean, prior_std, p_jump, s_jump)
+    p_proposal = np.where((p_jump > 0) & (s_jump > 0),
+                          np.maximum(p_jump, proposal_jump_fraction), 0.0)
+    proposal = CoordinateMixture(prior_mean, prior_std, p_proposal, s_jump)
     resamples = evaluations = 0
     result = None
     for layer, beta in enumerate(betas):
@@ -200,14 +264,15 @@ def annealed_coordinate_particle_filter(
         else:
             def scored(q, beta=beta):
                 return beta * np.asarray(log_likelihood(q), float)
-        proposal = {} if layer == 0 else {"proposal_mean": mean, "proposal_std": std}
+        is_prior = layer == 0 and not prior.has_jumps
         result = coordinate_particle_filter(prior_mean, prior_std, blocks, num_particles,
-                                            scored, rng, max_kl, **proposal)
+                                            scored, rng, max_kl, prior,
+                                            None if is_prior else proposal)
         resamples += result.num_resamples
         evaluations += result.num_evaluations
         if layer < len(betas) - 1:
-            mean = result.mean
-            std = np.maximum(np.sqrt(result.variance), keep_std_fraction * std)
+            std = np.maximum(np.sqrt(result.variance), keep_std_fraction * proposal.std)
+            proposal = CoordinateMixture(result.mean, std, p_proposal, s_jump)
     result.num_resamples = resamples
     result.num_evaluations = evaluations
     return result

@@ -1,0 +1,128 @@
+"""The tracker's health: is each image consistent with the estimate, and is it tracking?
+
+After each image update the robot is rendered once at the estimate (the posterior mean at
+the image time) and compared, pixel by pixel, with the image:
+
+* ``robot_pixels``: pixels where the estimate shows the robot and the image is valid;
+* ``agreement``: the fraction of those whose depth is within 3σ (pixel noise) of it;
+* ``see_through``: the fraction where the camera sees *behind* the estimated robot, by
+  more than 3σ and ``SEE_THROUGH_MARGIN_M``. An occluder only ever makes the image
+  nearer than the robot, so seeing through it means the robot is not where the
+  estimate puts it: the one disagreement that occlusion cannot explain.
+
+:class:`HealthMonitor` turns the per-image figures into a state:
+
+* ``tracking``: the latest images agree with the estimate;
+* ``uncertain``: the latest image saw too little of the robot to say (out of view, or
+  hidden), or one image disagreed;
+* ``lost``: ``lost_after_images`` consecutive images disagreed (``see_through`` above
+  ``max_see_through``). A controller should fall back to the encoders.
+
+The state returns to ``tracking`` after ``recovered_after_images`` consistent images.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_tracker.core.likelihood import LikelihoodParams, pixel_sigma, valid_pixels
+
+#: Depth behind the estimated robot that counts as seeing through it, besides 3σ (m).
+SEE_THROUGH_MARGIN_M = 0.02
+
+
+class HealthState(enum.IntEnum):
+    """What a controller should make of the estimate."""
+
+    TRACKING = 0
+    UNCERTAIN = 1
+    LOST = 2
+
+
+@dataclass(frozen=True)
+class ImageConsistency:
+    """How one image compares with the estimate at its time."""
+
+    time_s: float
+    robot_pixels: int
+    agreement: float
+    see_through: float
+
+
+def image_consistency(time_s: float, rendered_m: np.ndarray, observed_m: np.ndarray,
+                      params: LikelihoodParams) -> ImageConsistency:
+    """Compares the estimate's rendered depth (inf: no robot) with the observed image (same
+    shape, NaN/0: invalid)."""
+    rendered_m = np.asarray(rendered_m, float)
+    observed_m = np.asarray(observed_m, float)
+    if rendered_m.shape != observed_m.shape:
+        raise ValueError(f"rendered {rendered_m.shape} and observed {observed_m.shape} "
+                         f"images differ in shape")
+    robot = np.isfinite(rendered_m) & valid_pixels(observed_m, params)
+    count = int(robot.sum())
+    if count == 0:
+        return ImageConsistency(float(time_s), 0, 0.0, 0.0)
+    z, d = observed_m[robot], rendered_m[robot]
+    sigma = pixel_sigma(z, params)
+    agree = np.abs(z - d) <= 3.0 * sigma
+    behind = z > d + 3.0 * sigma + SEE_THROUGH_MARGIN_M
+    return ImageConsistency(float(time_s), count, float(agree.mean()), float(behind.mean()))
+
+
+@dataclass
+class HealthParams:
+    """Thresholds of the health state; loadable from YAML."""
+
+    #: Fewer robot pixels than this (at the processing resolution) say nothing.
+    min_robot_pixels: int = 30
+    #: An image disagrees when more than this fraction of the robot is seen through.
+    max_see_through: float = 0.25
+    #: Consecutive disagreeing images before ``lost``.
+    lost_after_images: int = 4
+    #: Consecutive consistent images before ``tracking`` again.
+    recovered_after_images: int = 2
+
+    def validate(self) -> None:
+        """Raises ValueError naming the field."""
+        checks = (
+            ("min_robot_pixels", self.min_robot_pixels >= 1, "must be >= 1"),
+            ("max_see_through", 0 < self.max_see_through < 1, "must be in (0, 1)"),
+            ("lost_after_images", self.lost_after_images >= 1, "must be >= 1"),
+            ("recovered_after_images", self.recovered_after_images >= 1, "must be >= 1"),
+        )
+        for name, ok, why in checks:
+            if not ok:
+                raise ValueError(f"health.{name} = {getattr(self, name)!r}: {why}")
+
+
+@dataclass(frozen=True)
+class TrackerHealth:
+    """The health state after the latest image, and that image's consistency."""
+
+    state: HealthState = HealthState.UNCERTAIN
+    latest: ImageConsistency | None = None
+    disagreeing_in_a_row: int = 0
+    agreeing_in_a_row: int = 0
+
+
+def next_health(health: TrackerHealth, image: ImageConsistency,
+                params: HealthParams) -> TrackerHealth:
+    """The health after one more image (a pure function, so the Drake system can keep
+    its state in the Context)."""
+    if image.robot_pixels < params.min_robot_pixels:
+        state = HealthState.LOST if health.state == HealthState.LOST else HealthState.UNCERTAIN
+        return TrackerHealth(state, image, health.disagreeing_in_a_row, 0)
+    if image.see_through > params.max_see_through:
+        bad = health.disagreeing_in_a_row + 1
+        state = HealthState.LOST if bad >= params.lost_after_images else \
+            max(health.state, HealthState.UNCERTAIN)
+        return TrackerHealth(state, image, bad, 0)
+    good = health.agreeing_in_a_row + 1
+    if health.state == HealthState.TRACKING or good >= params.recovered_after_images:
+        state = HealthState.TRACKING
+    else:
+        state = health.state
+    return TrackerHealth(state, image, 0, good)
