@@ -1,41 +1,119 @@
-"""The ``drake-tracker`` command line: demo, record, track, bench, evaluate.
+"""The ``drake-tracker`` command line: argument parsing and the common error handling.
 
-Each subcommand's work lives in its own module; this file only parses arguments.
+Each subcommand's work lives in its own module. Arguments are checked here, before any
+work starts or any file is written: a mistake prints one line (exit code 2, no
+traceback; ``--debug`` shows it).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
+
+from drake_tracker.cli_args import (
+    UsageError,
+    check_new_file,
+    check_out_dir,
+    check_params_for_model,
+    load_params_arg,
+    load_run_arg,
+    positive_int,
+    positive_seconds,
+    resolve_scenario,
+    scenario_name,
+)
+
+DESCRIPTION = """\
+Track a robot arm from its joint encoders and a depth camera, on Drake.
+
+Start with 'drake-tracker demo --duration 3' (about a minute); each command has
+its own --help."""
+
+SCENARIO_HELP = ("a preset SEQUENCE/BIAS, e.g. occlusion/time-varying (a bare SEQUENCE "
+                 "means SEQUENCE/constant; 'drake-tracker scenarios' lists them), or a "
+                 "scenario YAML file (default: %(default)s)")
+PARAMS_HELP = ("tracker parameters YAML ('drake-tracker params --defaults' prints every "
+               "field; examples/params.yaml is a commented sample); default: the defaults")
+
+
+class _CommandParser(argparse.ArgumentParser):
+    """A subcommand's parser: examples kept as written, ``--debug``, and itself in the
+    parsed namespace (so errors print this command's usage)."""
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
+        if kwargs.get("description"):
+            kwargs["description"] = textwrap.fill(kwargs["description"], 79)
+        super().__init__(**kwargs)
+        self.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                          help="show the full traceback of an error")
+        self.set_defaults(_parser=self)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    from drake_tracker import __version__
+
+    try:
+        drake = version("drake")
+    except PackageNotFoundError:
+        drake = "unknown"
+    return f"drake-tracker {__version__} (drake {drake})"
 
 
 def _add_demo(sub) -> None:
-    p = sub.add_parser("demo", help="simulate a scenario, track it, and write a report")
-    p.add_argument("--scenario", default="s-full-arm/constant",
-                   help="preset name or YAML file (default: %(default)s)")
+    p = sub.add_parser(
+        "demo", help="simulate a scenario, track it in the Diagram, and report the errors",
+        description="Simulates a scenario with the tracker inside the Drake Diagram, prints "
+                    "the hand-pose error percentiles of the encoders alone and of the "
+                    "tracker, and writes report.json, errors.png, meshcat.html and "
+                    "diagram.dot (diagram.png with Graphviz) to --out.",
+        epilog="examples:\n  drake-tracker demo --duration 3\n"
+               "  drake-tracker demo --scenario occlusion/constant --out out/occlusion")
+    p.add_argument("--scenario", default="s-full-arm/constant", help=SCENARIO_HELP)
     p.add_argument("--out", default="out/demo", help="output folder (default: %(default)s)")
-    p.add_argument("--duration", type=float, default=None,
-                   help="override the scenario duration (s)")
-    p.add_argument("--params", default=None, help="tracker parameters YAML file")
+    p.add_argument("--duration", type=positive_seconds, default=None, metavar="SECONDS",
+                   help="simulate this long instead of the scenario's duration")
+    p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
 
     def run(args):
+        scenario = resolve_scenario(args.scenario)
+        params = load_params_arg(args.params)
+        check_out_dir(args.out)
+        if args.params:
+            from drake_tracker.robot import build_tracker_model
+
+            model = build_tracker_model(scenario.resolved_robot_config())
+            check_params_for_model(params, model, f"parameter file '{args.params}'")
         from drake_tracker.demo import run_demo
 
-        return run_demo(args)
+        return run_demo(args, scenario=scenario, params=params)
 
     p.set_defaults(func=run)
 
 
 def _add_record(sub) -> None:
-    p = sub.add_parser("record", help="simulate a scenario and write a recorded run (.npz)")
-    p.add_argument("--scenario", default="s-full-arm/constant")
-    p.add_argument("--out", required=True, help="output .npz file")
-    p.add_argument("--duration", type=float, default=None,
-                   help="override the scenario duration (s)")
-    p.add_argument("--image-stride", type=int, default=8,
-                   help="store every N-th pixel of each image (default: %(default)s)")
+    p = sub.add_parser(
+        "record", help="simulate a scenario and write a recorded run (.npz)",
+        description="Simulates a scenario and writes every encoder reading, every depth "
+                    "image (subsampled) and the ground truth to one .npz file (format in "
+                    "drake_tracker/recording.py), to replay with 'drake-tracker track'.",
+        epilog="example:\n  drake-tracker record --scenario arm/time-varying --duration 5 "
+               "--out out/arm.npz")
+    p.add_argument("--scenario", default="s-full-arm/constant", help=SCENARIO_HELP)
+    p.add_argument("--out", required=True, metavar="FILE.npz", help="output file")
+    p.add_argument("--duration", type=positive_seconds, default=None, metavar="SECONDS",
+                   help="simulate this long instead of the scenario's duration")
+    p.add_argument("--image-stride", type=positive_int, default=8, metavar="N",
+                   help="store every N-th pixel of each image row and column "
+                        "(default: %(default)s)")
 
     def run(args):
+        resolve_scenario(args.scenario)
+        args.scenario = scenario_name(args.scenario)
+        check_new_file(args.out, ".npz")
         from drake_tracker.sim.record import run_record
 
         return run_record(args)
@@ -44,28 +122,92 @@ def _add_record(sub) -> None:
 
 
 def _add_track(sub) -> None:
-    p = sub.add_parser("track", help="replay a recorded run through the offline tracker")
-    p.add_argument("--run", required=True, help="recorded run (.npz)")
-    p.add_argument("--params", default=None, help="tracker parameters YAML file")
+    p = sub.add_parser(
+        "track", help="replay a recorded run through the offline tracker",
+        description="Feeds a recorded run's readings and images to the offline tracker in "
+                    "the order a live tracker receives them and prints the hand-pose error "
+                    "percentiles of the encoders alone and of the tracker.",
+        epilog="example:\n  drake-tracker record --duration 5 --out out/run.npz\n"
+               "  drake-tracker track --run out/run.npz --params examples/params.yaml")
+    p.add_argument("--run", required=True, metavar="FILE.npz",
+                   help="recorded run, written by 'drake-tracker record'")
+    p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
     p.add_argument("--out", default=None, help="folder for report.json (optional)")
 
     def run(args):
-        from drake_tracker.offline import run_track
+        recorded = load_run_arg(args.run)
+        params = load_params_arg(args.params)
+        if args.out:
+            check_out_dir(args.out)
+        from drake_tracker.offline import model_for_run, run_track
 
-        return run_track(args)
+        try:
+            model = model_for_run(recorded)
+        except ValueError as err:
+            raise UsageError(f"'{args.run}': its robot model: {err}") from None
+        if args.params:
+            check_params_for_model(params, model, f"parameter file '{args.params}'")
+        return run_track(args, run=recorded, params=params, model=model)
 
     p.set_defaults(func=run)
 
 
 def _add_bench(sub) -> None:
-    p = sub.add_parser("bench", help="benchmark the tracker's hot paths")
-    p.add_argument("--out", default="out/bench", help="folder for bench.json")
+    p = sub.add_parser(
+        "bench", help="benchmark the tracker's hot paths",
+        description="Measures image updates per second, the batched renderer against "
+                    "Drake's RenderEngineVtk, and the Kalman bank and re-filtering steps; "
+                    "writes bench.json to --out.")
+    p.add_argument("--out", default="out/bench",
+                   help="folder for bench.json (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="fewer repetitions")
 
     def run(args):
+        check_out_dir(args.out)
         from drake_tracker.bench import run_bench
 
         return run_bench(args)
+
+    p.set_defaults(func=run)
+
+
+def _add_scenarios(sub) -> None:
+    p = sub.add_parser(
+        "scenarios", help="list the scenario presets, one line each",
+        description="Lists the presets that --scenario accepts: name, duration, motion, "
+                    "encoder bias. Every preset also has the camera's 2 cm / 2.6 deg "
+                    "mounting error.")
+
+    def run(args):
+        from drake_tracker.listing import preset_lines
+
+        print("\n".join(preset_lines()))
+        print("A bare SEQUENCE means SEQUENCE/constant. A YAML file of "
+              "drake_tracker.sim.scenario.Scenario also works; it may start with "
+              "'preset: NAME' and change any field.")
+        return 0
+
+    p.set_defaults(func=run)
+
+
+def _add_params(sub) -> None:
+    p = sub.add_parser(
+        "params", help="print the tracker parameters as YAML (defaults, or a file's)",
+        description="Prints tracker parameters as YAML that --params accepts: the "
+                    "defaults, or the values a parameter file gives (after checking it).",
+        epilog="examples:\n  drake-tracker params --defaults > my_params.yaml\n"
+               "  drake-tracker params examples/params.yaml")
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument("--defaults", action="store_true", help="the default parameters")
+    which.add_argument("file", nargs="?", metavar="YAML",
+                       help="a parameter file to check and print with the defaults filled in")
+
+    def run(args):
+        from drake_tracker.params import tracker_params_to_yaml
+
+        print(tracker_params_to_yaml(load_params_arg(None if args.defaults else args.file)),
+              end="")
+        return 0
 
     p.set_defaults(func=run)
 
@@ -120,17 +262,43 @@ def _add_evaluate(sub) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="drake-tracker", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    for add in (_add_demo, _add_record, _add_track, _add_bench, _add_evaluate):
+    """The ``drake-tracker`` parser with every subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="drake-tracker", description=DESCRIPTION,
+        formatter_class=lambda prog: argparse.RawDescriptionHelpFormatter(
+            prog, max_help_position=16))
+    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--debug", action="store_true", default=False,
+                        help="show the full traceback of an error")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                parser_class=_CommandParser)
+    for add in (_add_demo, _add_record, _add_track, _add_bench, _add_evaluate,
+                _add_scenarios, _add_params):
         add(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    result = args.func(args)
-    return int(result or 0)
+    """Runs one command; a mistake in the arguments prints one line and returns 2."""
+    parser = build_parser()
+    args, unknown = parser.parse_known_args(argv)
+    command_parser = getattr(args, "_parser", parser)
+    if unknown:
+        command_parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    try:
+        if getattr(args, "params", None):
+            load_params_arg(args.params)
+        return int(args.func(args) or 0)
+    except UsageError as err:
+        if args.debug:
+            raise
+        print(f"{command_parser.prog}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print(f"{command_parser.prog}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

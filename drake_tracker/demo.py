@@ -6,14 +6,20 @@ Writes to ``--out`` (default ``out/demo``):
   "p99"}, "rotation_deg": {...}}}, "wall_time_s": .., "simulation_wall_time_s": ..,
   "scenario": .., "duration_s": .., "num_readings": .., "num_images": ..,
   "num_truth_samples": ..}``; errors are of the end effector pose in the camera frame
-  against the truth (in the TRUE camera frame), sampled at 100 Hz;
-* ``errors.png``: translation and rotation error of each method over time;
+  against the truth (in the TRUE camera frame), sampled at 100 Hz from the first
+  encoder reading on (before it there is no estimate);
+* ``errors.png``: translation and rotation error of each method over time, log axes,
+  with the scenario's bias steps, occlusion and out-of-view windows marked;
 * ``meshcat.html``: a standalone Meshcat recording, all in one scene: the true robot in
-  its colours, the robot where the raw (biased) encoders put it (white, translucent),
-  the tracker's estimate (orange, translucent), and the depth camera's points placed
-  with the estimated camera pose;
-* ``diagram.dot`` (and ``diagram.png`` where Graphviz's ``dot`` is installed): the
-  Diagram's structure.
+  its colours, the robot where the raw (biased) encoders put it (translucent blue),
+  the tracker's estimate (translucent green), the camera's frustum at its true pose
+  (black) and at the estimated one (green), the depth camera's points placed with the
+  estimated camera pose (magenta), and a legend;
+* ``diagram.dot`` (and ``diagram.png`` where Graphviz's ``dot`` is installed, else a
+  one-line note): the Diagram's structure.
+
+A progress bar of simulated seconds goes to stderr, with the live Meshcat URL (the live
+view ends with the run).
 
 ``encoders_only`` is computed from the recorded readings; ``full_fusion`` is the
 tracker running inside the simulation Diagram (``AddTracker`` wired to the world's
@@ -29,7 +35,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Rgba
 
 from drake_tracker.metrics import format_report_table, method_report, pose_errors
 from drake_tracker.offline import encoders_only_X_CE
@@ -47,44 +52,48 @@ METHODS: dict[str, Callable[..., np.ndarray]] = {"encoders_only": encoders_only_
 
 def evaluate_methods(run: RecordedRun, estimates: dict[str, np.ndarray]) -> dict:
     """``{"methods": {name: method_report(...)}}`` of (T, 4, 4) estimates vs
-    ``run.truth_X_CE`` (translation in mm, rotation in deg)."""
+    ``run.truth_X_CE`` (translation in mm, rotation in deg), from the first reading on."""
     report = {"methods": {}}
     for name, X in estimates.items():
         X = np.asarray(X, float)
         if X.shape != run.truth_X_CE.shape:
             raise ValueError(f"estimate '{name}' has shape {X.shape}, the truth "
                              f"{run.truth_X_CE.shape}")
-        report["methods"][name] = method_report(X, run.truth_X_CE)
+        keep = first_estimate_mask(run)
+        report["methods"][name] = method_report(X[keep], run.truth_X_CE[keep])
     return report
 
 
-def plot_errors(run: RecordedRun, estimates: dict[str, np.ndarray], path: Path) -> Path:
-    """PNG of translation (mm) and rotation (deg) error over time, one line per method."""
-    import matplotlib
+def first_estimate_mask(run: RecordedRun) -> np.ndarray:
+    """Truth samples after the first encoder reading: before it there is no estimate."""
+    if len(run.reading_times_s) == 0:
+        return np.zeros(len(run.truth_times_s), bool)
+    return run.truth_times_s > run.reading_times_s[0]
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    for name, X in estimates.items():
-        t_err, r_err = pose_errors(X, run.truth_X_CE)
-        axes[0].plot(run.truth_times_s, t_err, label=name)
-        axes[1].plot(run.truth_times_s, r_err, label=name)
-    axes[0].set_ylabel("translation error (mm)")
-    axes[1].set_ylabel("rotation error (deg)")
-    axes[1].set_xlabel("time (s)")
-    axes[0].legend()
-    for ax in axes:
-        ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+def plot_errors(run: RecordedRun, estimates: dict[str, np.ndarray], path: Path,
+                scenario=None) -> Path:
+    """PNG of translation (mm) and rotation (deg) error over time on log axes, one line
+    per method, from the first estimate on, with the scenario's events marked."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_tracker.plots import plot_error_time_series
+    from drake_tracker.sim.scenario import Scenario
+
+    if scenario is None:
+        scenario = yaml_load_typed(schema=Scenario, data=run.scenario_yaml)
+    keep = first_estimate_mask(run)
+    errors = {name: tuple(e[keep] for e in pose_errors(X, run.truth_X_CE))
+              for name, X in estimates.items()}
+    title = (f"{scenario.name}: hand pose error in the camera frame "
+             f"({run.duration_s:.1f} s simulated)")
+    return plot_error_time_series(run.truth_times_s[keep], errors, scenario, path, title)
 
 
 def demo_hook(meshcat, params: TrackerParams):
     """An ``add_systems`` hook: the tracker on the world's ports, and Meshcat views of the
-    true world, the encoders-only robot, the estimate and the camera's points."""
+    true world, the encoders-only robot, the estimate, the camera's frustum at its true
+    and estimated poses, and the camera's points (placed with the estimated pose)."""
     from pydrake.geometry import (
         MeshcatPointCloudVisualizer,
         MeshcatVisualizer,
@@ -95,7 +104,16 @@ def demo_hook(meshcat, params: TrackerParams):
 
     from drake_tracker.systems.add_tracker import AddTracker
     from drake_tracker.systems.point_cloud import DepthFrameToPointCloud
-    from drake_tracker.visualization import ENCODERS_RGBA, ESTIMATE_RGBA, AddGhostRobot
+    from drake_tracker.visualization import (
+        ENCODERS_RGBA,
+        ESTIMATE_RGBA,
+        POINTS_RGBA,
+        TRUE_CAMERA_RGBA,
+        AddGhostRobot,
+        CameraFrustumVisualizer,
+        FramePoseInWorld,
+        frame_the_robot,
+    )
 
     def hook(builder, world):
         tracker = AddTracker(builder, world.model, world.intrinsics, params,
@@ -104,7 +122,7 @@ def demo_hook(meshcat, params: TrackerParams):
         period = 1.0 / 30.0
         MeshcatVisualizer.AddToBuilder(
             builder, world.scene_graph, meshcat,
-            MeshcatVisualizerParams(role=Role.kIllustration, prefix="true",
+            MeshcatVisualizerParams(role=Role.kIllustration, prefix="truth",
                                     publish_period=period))
         n = len(world.robot_joint_names)
         mux = builder.AddNamedSystem("encoders_ghost_positions", Multiplexer([n, 6]))
@@ -113,30 +131,66 @@ def demo_hook(meshcat, params: TrackerParams):
         builder.Connect(world.port("measured_position"), mux.get_input_port(0))
         builder.Connect(zeros.get_output_port(), mux.get_input_port(1))
         AddGhostRobot(builder, world.robot_config, meshcat, mux.get_output_port(),
-                      "encoders", ENCODERS_RGBA)
+                      "encoders_only", ENCODERS_RGBA)
         AddGhostRobot(builder, world.robot_config, meshcat,
                       tracker.port("estimated_position"), "estimate", ESTIMATE_RGBA)
+        true_camera = builder.AddNamedSystem(
+            "true_camera_pose", FramePoseInWorld(world.plant, world.camera_frame))
+        builder.Connect(world.port("plant_positions"), true_camera.get_input_port())
+        for name, pose, rgba in (("true_camera", true_camera.get_output_port(),
+                                  TRUE_CAMERA_RGBA),
+                                 ("estimated_camera", tracker.port("X_WC"), ESTIMATE_RGBA)):
+            frustum = builder.AddNamedSystem(
+                f"{name}_frustum",
+                CameraFrustumVisualizer(meshcat, name, world.intrinsics, rgba,
+                                        publish_period_s=period))
+            builder.Connect(pose, frustum.get_input_port())
         cloud = builder.AddNamedSystem("point_cloud", DepthFrameToPointCloud(world.intrinsics))
         builder.Connect(world.port("depth_frame"), cloud.get_input_port())
         points = builder.AddNamedSystem(
             "point_cloud_visualizer",
             MeshcatPointCloudVisualizer(meshcat, "camera_points", publish_period=period))
-        points.set_default_rgba(Rgba(0.1, 0.4, 1.0, 1.0))
+        points.set_default_rgba(POINTS_RGBA)
+        points.set_point_size(0.006)
         builder.Connect(cloud.get_output_port(), points.cloud_input_port())
         builder.Connect(tracker.port("X_WC"), points.pose_input_port())
+        frame_the_robot(meshcat, world.plant, world.end_effector_frame.model_instance(),
+                        world.reference.positions(0.0))
         meshcat.StartRecording(frames_per_second=30.0)
         return {"full_fusion_X_CE": tracker.port("X_CE")}
 
     return hook
 
 
+def legend_entries() -> list:
+    """The legend of the demo's Meshcat scene."""
+    from drake_tracker.visualization import (
+        ENCODERS_RGBA,
+        ESTIMATE_RGBA,
+        POINTS_RGBA,
+        TRUE_CAMERA_RGBA,
+        LegendEntry,
+    )
+
+    return [LegendEntry(None, "<b>truth</b>: the robot in its own colours"),
+            LegendEntry(ENCODERS_RGBA, "<b>encoders only</b>: where the raw readings put it"),
+            LegendEntry(ESTIMATE_RGBA, "<b>estimate</b>: the tracker (and its camera pose)"),
+            LegendEntry(TRUE_CAMERA_RGBA, "true camera frustum"),
+            LegendEntry(POINTS_RGBA, "depth points, placed with the estimated camera")]
+
+
 def write_diagram(graphviz: str, out: Path) -> Path | None:
-    """Writes ``diagram.dot`` and, when Graphviz's ``dot`` is on the PATH, ``diagram.png``."""
+    """Writes ``diagram.dot`` and, when Graphviz's ``dot`` is on the PATH, ``diagram.png``
+    (a one-line note says when it is not)."""
     import shutil
     import subprocess
 
+    from drake_tracker.cli_args import note
+
     (out / "diagram.dot").write_text(graphviz)
     if shutil.which("dot") is None:
+        note("Graphviz's 'dot' is not installed: wrote diagram.dot, not diagram.png "
+             "(install graphviz, or paste diagram.dot into any Graphviz viewer)")
         return None
     png = out / "diagram.png"
     subprocess.run(["dot", "-Tpng", "-Gdpi=60", str(out / "diagram.dot"), "-o", str(png)],
@@ -144,32 +198,55 @@ def write_diagram(graphviz: str, out: Path) -> Path | None:
     return png
 
 
-def run_demo(args) -> int:
-    """The ``drake-tracker demo`` command (``--scenario``, ``--out``, ``--duration``)."""
+def _start_meshcat():
+    """A Meshcat server on localhost at a free port, without Drake's own INFO line (the
+    demo prints the URL with what it shows)."""
+    import logging
+
     from pydrake.geometry import Meshcat, MeshcatParams
 
-    from drake_tracker.sim.record import simulate_and_record
-
-    start = time.perf_counter()
-    scenario = load_scenario(getattr(args, "scenario", None) or DEFAULT_SCENARIO)
-    params = load_tracker_params(getattr(args, "params", None))
-    out = Path(getattr(args, "out", None) or "out/demo")
-    out.mkdir(parents=True, exist_ok=True)
     meshcat_params = MeshcatParams()
     meshcat_params.host = "localhost"
     meshcat_params.port = 0  # a free port
-    meshcat = Meshcat(meshcat_params)
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(logging.WARNING)
+    try:
+        return Meshcat(meshcat_params)
+    finally:
+        logger.setLevel(level)
+
+
+def run_demo(args, scenario=None, params: TrackerParams | None = None,
+             progress: bool = True) -> int:
+    """The ``drake-tracker demo`` command (``--scenario``, ``--out``, ``--duration``,
+    ``--params``); ``scenario`` and ``params``, when given, were already loaded from
+    them (the command line checks them before anything is written)."""
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.visualization import add_legend
+
+    start = time.perf_counter()
+    if scenario is None:
+        scenario = load_scenario(getattr(args, "scenario", None) or DEFAULT_SCENARIO)
+    if params is None:
+        params = load_tracker_params(getattr(args, "params", None))
+    out = Path(getattr(args, "out", None) or "out/demo")
+    out.mkdir(parents=True, exist_ok=True)
+    meshcat = _start_meshcat()
+    print(f"live view: {meshcat.web_url()} (open it now: it ends with the run; "
+          f"{out}/meshcat.html keeps the recording)", flush=True)
     run = simulate_and_record(scenario, duration_s=getattr(args, "duration", None),
-                              add_systems=demo_hook(meshcat, params), validate=False)
+                              add_systems=demo_hook(meshcat, params), validate=False,
+                              progress=progress)
     meshcat.StopRecording()
     meshcat.PublishRecording()
-    (out / "meshcat.html").write_text(meshcat.StaticHtml())
+    (out / "meshcat.html").write_text(add_legend(meshcat.StaticHtml(), legend_entries()))
 
     model = build_tracker_model(scenario.resolved_robot_config())
     estimates = {name: method(run, model) for name, method in METHODS.items()}
     estimates["full_fusion"] = run.extra["full_fusion_X_CE"]
     report = evaluate_methods(run, estimates)
-    plot_errors(run, estimates, out / "errors.png")
+    plot_errors(run, estimates, out / "errors.png", scenario)
     report.update({
         "scenario": scenario.name,
         "duration_s": run.duration_s,
@@ -180,11 +257,14 @@ def run_demo(args) -> int:
         "real_time_factor": run.duration_s / run.extra["wall_time_s"],
         "wall_time_s": time.perf_counter() - start,
     })
-    write_diagram(run.extra["graphviz"], out)
+    png = write_diagram(run.extra["graphviz"], out)
     (out / "report.json").write_text(json.dumps(report, indent=2))
-    print(f"scenario {scenario.name}, {run.duration_s:.1f} s simulated")
+    print(f"scenario {scenario.name}, {run.duration_s:.1f} s simulated; errors from the "
+          "first reading on")
     print(format_report_table(report))
     print(f"real-time factor {report['real_time_factor']:.2f} (simulation "
           f"{report['simulation_wall_time_s']:.1f} s); wall time {report['wall_time_s']:.1f} s")
-    print(f"wrote {out}/report.json, errors.png, meshcat.html, diagram.dot")
+    written = ["report.json", "errors.png", "meshcat.html (open it in a browser)",
+               "diagram.dot"] + (["diagram.png"] if png else [])
+    print(f"wrote to {out}/: {', '.join(written)}")
     return 0

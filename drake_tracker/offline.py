@@ -18,6 +18,7 @@ import numpy as np
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.metrics import format_report_table, method_report
 from drake_tracker.params import TrackerParams, load_tracker_params
+from drake_tracker.progress import count_bar
 from drake_tracker.recording import RecordedRun
 from drake_tracker.robot import RobotConfig, build_tracker_model, load_robot_config
 from drake_tracker.tracker import PoseReadout, Tracker, full_reading
@@ -49,8 +50,10 @@ def model_for_run(run: RecordedRun):
 
 
 def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None,
-               sample_times_s: np.ndarray | None = None) -> ReplayResult:
-    """Replays ``run`` through a fresh :class:`Tracker` and samples its estimates."""
+               sample_times_s: np.ndarray | None = None,
+               progress: bool = False) -> ReplayResult:
+    """Replays ``run`` through a fresh :class:`Tracker` and samples its estimates;
+    ``progress`` shows a bar of the images fed (stderr)."""
     model = model if model is not None else model_for_run(run)
     if list(run.joint_names) != list(model.robot_joint_names):
         raise ValueError(f"the run's joints {run.joint_names} differ from the model's "
@@ -66,6 +69,7 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None
     next_image = 0
     next_sample = 0
     t_start = time.perf_counter()
+    bar = count_bar(len(image_order), "image", "tracking", enabled=progress)
 
     def sample_until(t_limit: float) -> None:
         nonlocal next_sample
@@ -85,9 +89,11 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None
                                          float(run.image_arrival_times_s[i]),
                                          run.depth_images_m[i], int(i)))
             next_image += 1
+            bar.update(1)
         sample_until(t)
         tracker.add_reading(float(t), run.readings_rad[k])
     sample_until(np.inf)
+    bar.close()
     virtual = model.virtual_joint_indices
     return ReplayResult(
         times_s=np.asarray(times), positions=out_q, position_variances=out_var, biases=out_b,
@@ -129,12 +135,14 @@ def run_report(run: RecordedRun, estimates: dict[str, np.ndarray]) -> dict:
     return report
 
 
-def run_track(args) -> int:
-    """``drake-tracker track --run FILE [--params YAML] [--out DIR]``."""
-    run = RecordedRun.load(args.run)
-    params = load_tracker_params(args.params)
-    model = model_for_run(run)
-    result = replay_run(run, params, model)
+def run_track(args, run: RecordedRun | None = None, params: TrackerParams | None = None,
+              model=None) -> int:
+    """``drake-tracker track --run FILE [--params YAML] [--out DIR]``; ``run``,
+    ``params`` and ``model``, when given, were already loaded from those arguments."""
+    run = run if run is not None else RecordedRun.load(args.run)
+    params = params if params is not None else load_tracker_params(args.params)
+    model = model if model is not None else model_for_run(run)
+    result = replay_run(run, params, model, progress=True)
     report = run_report(run, {"encoders_only": encoders_only_X_CE(run, model),
                               "full_fusion": result.X_CE})
     updates = np.array(result.image_update_s)

@@ -29,6 +29,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 
 from drake_tracker.core.camera import subsample
+from drake_tracker.progress import SimulatedSecondsBar
 from drake_tracker.recording import RecordedRun
 from drake_tracker.sim.scenario import Scenario, load_scenario, validate_scenario
 from drake_tracker.sim.world import AddSimulatedWorld, SimulatedWorld
@@ -47,12 +48,13 @@ def _as_array(value) -> np.ndarray:
 def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
                         image_stride: int = 8, truth_rate_hz: float = 100.0,
                         add_systems: AddSystems | None = None,
-                        validate: bool = True) -> RecordedRun:
+                        validate: bool = True, progress: bool = False) -> RecordedRun:
     """Simulates ``scenario`` for ``duration_s`` (default: ``scenario.duration_s``) and
     returns the recorded run. ``add_systems(builder, world)`` may add systems (e.g. a
     tracker, a Meshcat visualizer) and return ports to sample at the truth times into
     ``run.extra`` (RigidTransforms as 4x4). ``run.extra`` also holds
-    ``"wall_time_s"`` (simulation wall time, s)."""
+    ``"wall_time_s"`` (simulation wall time, s). ``progress`` shows a bar of simulated
+    seconds on stderr."""
     if validate:
         validate_scenario(scenario)
     if image_stride < 1:
@@ -101,7 +103,9 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
         for name, port in probes.items():
             extra[name].append(_as_array(read(port)))
 
+    bar = SimulatedSecondsBar(duration, enabled=progress)
     for t, sample_truth in zip(stops, is_truth):
+        bar.advance_to(t)
         # The first AdvanceTo(0) also performs the discrete updates at 0 (a dynamic
         # plant steps to time_step_s), so the state at 0 is read before it.
         if sample_truth and t == 0.0:
@@ -123,6 +127,7 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
             images.append(np.array(subsample(frame.depth_m, image_stride), np.float32))
         if sample_truth and t > 0.0:
             sample_truth_now(float(t))
+    bar.close()
     wall = time.perf_counter() - start
 
     # The true bias at a truth time is that of the latest sample at or before it (the
@@ -162,7 +167,7 @@ def run_record(args) -> int:
     simulates and writes the run as ``.npz`` (format in ``drake_tracker.recording``)."""
     scenario = load_scenario(args.scenario)
     run = simulate_and_record(scenario, duration_s=args.duration,
-                              image_stride=args.image_stride, validate=False)
+                              image_stride=args.image_stride, validate=False, progress=True)
     path = run.save(args.out)
     print(f"recorded '{scenario.name}': {len(run.reading_times_s)} readings, "
           f"{len(run.image_capture_times_s)} images "
