@@ -44,3 +44,40 @@ def configure_threading_layer() -> str:
 
 
 configure_threading_layer()
+
+
+class SerialOrParallel:
+    """Chooses, call by call, between a kernel's serial and parallel compilations by their
+    measured cost per item, so that more threads never make the work slower.
+
+    Even a non-spinning layer must wake its workers at each parallel call; on a loaded
+    machine that wake-up can cost more than the work of a CPF block (measured: 2 threads
+    3x slower than 1 at a load average of 25 on 2 cores). The parallel version is used
+    while it is the cheaper of the two (exponential moving averages of seconds per item);
+    every ``probe_every``-th call tries the other one, so a change of load is followed.
+    With one numba thread the serial version is always used.
+    """
+
+    def __init__(self, probe_every: int = 32, smoothing: float = 0.2):
+        self.probe_every = int(probe_every)
+        self.smoothing = float(smoothing)
+        self.cost_per_item: dict[bool, float | None] = {False: None, True: None}
+        self._calls = 0
+
+    def use_parallel(self) -> bool:
+        """Whether the next call should run the parallel compilation."""
+        if numba.get_num_threads() == 1:
+            return False
+        self._calls += 1
+        serial, parallel = self.cost_per_item[False], self.cost_per_item[True]
+        if parallel is None or serial is None:
+            return serial is not None  # measure each once: serial first, then parallel
+        faster = parallel < serial
+        return (not faster) if self._calls % self.probe_every == 0 else faster
+
+    def record(self, parallel: bool, seconds: float, items: int) -> None:
+        """Records a call's wall time for ``items`` items."""
+        cost = seconds / max(1, items)
+        old = self.cost_per_item[parallel]
+        self.cost_per_item[parallel] = cost if old is None else (
+            (1.0 - self.smoothing) * old + self.smoothing * cost)

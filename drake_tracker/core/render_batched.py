@@ -27,6 +27,7 @@ from drake_tracker.core.geometry import DEFAULT_SEGMENTS, RobotMeshes, extract_r
 from drake_tracker.core.kinematics import BatchedKinematics
 from drake_tracker.core.level_of_detail import LevelOfDetail, level_of_detail
 from drake_tracker.core.likelihood import PreparedObservation
+from drake_tracker.core.numba_threading import SerialOrParallel
 from drake_tracker.core.rasterize import frustum_planes, num_chunks, render_kernel, render_tables
 from drake_tracker.core.render_likelihood import fused_scores
 
@@ -67,6 +68,7 @@ class BatchedDepthRenderer:
                                           detail.min_reduction)
         self._tables = render_tables(self.meshes, self.kinematics.num_bodies)
         self._frame_tables = self.kinematics.frame_tables(model.camera_frame)
+        self._policy = SerialOrParallel()
         k = intrinsics
         self._fx = float(k.fx)
         self._fy = float(k.fy)
@@ -96,7 +98,7 @@ class BatchedDepthRenderer:
         q = self.kinematics.checked_positions(q)
         return fused_scores(q, self._frame_tables, self._tables, self._planes,
                             (self._fx, self._fy, self._cx, self._cy), self.near_m,
-                            self.far_m, observation)
+                            self.far_m, observation, self._policy)
 
     def render_camera_poses(self, X_CB: np.ndarray) -> np.ndarray:
         """Renders from body poses in the camera frame, (N, num_bodies, 4, 4)."""

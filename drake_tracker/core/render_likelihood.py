@@ -22,14 +22,15 @@ about 1e-12 relative (tested).
 from __future__ import annotations
 
 import math
+import time
 
 import numba
 import numpy as np
 from numba import njit, prange
 
-import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
 from drake_tracker.core.kinematics import relative_poses_one
 from drake_tracker.core.likelihood import PreparedObservation
+from drake_tracker.core.numba_threading import SerialOrParallel
 from drake_tracker.core.rasterize import num_chunks, render_particle
 from drake_tracker.core.vector_math import exp_inplace, log_inplace
 
@@ -174,13 +175,15 @@ _score_parallel = njit(parallel=True, cache=True)(_score_particles)
 
 def fused_scores(q: np.ndarray, frame_tables: tuple, render_tables: tuple,
                  frustum_planes: np.ndarray, projection: tuple[float, float, float, float],
-                 near_m: float, far_m: float, observation: PreparedObservation) -> np.ndarray:
+                 near_m: float, far_m: float, observation: PreparedObservation,
+                 policy: SerialOrParallel | None = None) -> np.ndarray:
     """(N,) log-likelihoods of configurations q (N, nq), C-contiguous and checked: forward
     kinematics to the camera frame (``frame_tables`` from
     :meth:`~drake_tracker.core.kinematics.BatchedKinematics.frame_tables`), rendering
     with ``render_tables`` (:func:`~drake_tracker.core.rasterize.render_tables`),
     ``frustum_planes`` and ``projection`` (fx, fy, cx, cy with the pixel-centre offset
-    applied), and scoring, in one kernel call; serial when numba has one thread."""
+    applied), and scoring, in one kernel call. Serial or parallel as ``policy`` chooses
+    (default: parallel whenever numba has more than one thread)."""
     height, width = observation.shape
     N = q.shape[0]
     out = np.zeros(N)
@@ -189,11 +192,18 @@ def fused_scores(q: np.ndarray, frame_tables: tuple, render_tables: tuple,
     fx, fy, cx, cy = projection
     o = observation
     chunks = num_chunks(N)
-    kernel = _score_parallel
-    if chunks == 1 or numba.get_num_threads() == 1:
-        kernel, chunks = _score_serial, 1
+    if policy is None:
+        parallel = numba.get_num_threads() > 1
+    else:
+        parallel = policy.use_parallel()
+    if chunks == 1:
+        parallel = False
+    kernel = _score_parallel if parallel else _score_serial
+    t0 = time.perf_counter()
     kernel(q, *frame_tables, *render_tables, frustum_planes, fx, fy, cx, cy, near_m, far_m,
-           chunks, height, width, o.pixel_slot, o.z, o.inv_sigma, o.lam_sigma2,
-           o.gauss_coeff, o.occ_coeff, o.log_p_occ_inf, o.uniform, o.occluder_rate_per_m,
-           o.occlusion_probability, _ERFC_COEFFS, out)
+           chunks if parallel else 1, height, width, o.pixel_slot, o.z, o.inv_sigma,
+           o.lam_sigma2, o.gauss_coeff, o.occ_coeff, o.log_p_occ_inf, o.uniform,
+           o.occluder_rate_per_m, o.occlusion_probability, _ERFC_COEFFS, out)
+    if policy is not None:
+        policy.record(parallel, time.perf_counter() - t0, N)
     return out
