@@ -15,12 +15,12 @@ METHOD_LABELS: dict[str, str] = {
     "vision_only": "vision only",
 }
 
-#: Method identifier -> line colour, the same in every plot.
+#: Method identifier -> line colour (those of the evaluation's figures).
 METHOD_COLORS: dict[str, str] = {
     "encoders_only": "0.45",
     "camera_offset_only": "tab:blue",
-    "full_fusion": "tab:green",
-    "vision_only": "tab:purple",
+    "full_fusion": "tab:orange",
+    "vision_only": "tab:green",
 }
 
 

@@ -11,6 +11,7 @@ import numpy as np
 from drake_tracker.evaluation.summary import settled
 from drake_tracker.evaluation.tasks import task_name
 from drake_tracker.methods import METHODS
+from drake_tracker.plots import mark_scenario_events, method_label
 
 #: One colour per method; the box plots draw their medians black over these.
 METHOD_COLORS = dict(zip(METHODS, ("0.6", "tab:blue", "tab:orange", "tab:green")))
@@ -98,18 +99,8 @@ def _plot_time_series(rows, seq, bias, methods, out_dir, plt, settle_s, scenario
         e = np.array([float(r["translation_mm"]) for r in sel])
         if len(t):
             t_end = max(t_end, t[-1])
-        ax.plot(t, e, color=METHOD_COLORS[method], label=method, lw=1)
-    if scenario.encoders.bias == "steps":
-        for k in range(1, int(t_end / scenario.encoders.step_period_s) + 1):
-            ax.axvline(k * scenario.encoders.step_period_s, color="k", ls=":", lw=0.8)
-    if scenario.occluder.enabled:
-        ax.axvspan(scenario.occluder.start_s, min(scenario.occluder.end_s, t_end),
-                   color="0.85", label="occluded")
-    if scenario.trajectory.kind == "in-out-in":
-        tr = scenario.trajectory
-        ax.axvspan(tr.excursion_start_s, min(t_end, tr.excursion_start_s
-                                             + 2 * tr.excursion_ramp_s + tr.excursion_duration_s),
-                   color="0.9", label="leaving / out of view")
+        ax.plot(t, e, color=METHOD_COLORS[method], label=method_label(method), lw=1)
+    mark_scenario_events(ax, scenario, t_end)
     if 0 < settle_s < t_end:
         ax.axvline(settle_s, color="tab:red", ls="--", lw=0.8, label="summary from here")
     ax.set_yscale("log")
