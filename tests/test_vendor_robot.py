@@ -1,7 +1,7 @@
 """A vendor's robot as it ships: a ROS-style package (package.xml) whose URDF refers to
-STL meshes through package:// URIs and has no camera or tool frame. The frames come from
-the RobotConfig alone; the batched renderer must agree with Drake's RenderEngineVtk on
-the converted meshes; Drake model directives load the same package."""
+STL meshes (and a DAE visual) through package:// URIs and has no camera or tool frame.
+The frames come from the RobotConfig alone; the batched renderer must agree with Drake's
+RenderEngineVtk on the converted meshes; model directives and an SDF load the package."""
 
 import numpy as np
 import pytest
@@ -76,8 +76,9 @@ def vendor(tmp_path_factory):
     }
     for name, mesh in shapes.items():
         mesh.export(package / "meshes" / f"{name}.stl")
+    shapes["hand"].export(package / "meshes" / "hand.dae")  # a COLLADA visual, as vendors
     hand = '<visual><origin xyz="0 0 0.33"/><geometry>' \
-           f'<mesh filename="package://{PACKAGE}/meshes/hand.stl"/></geometry></visual>'
+           f'<mesh filename="package://{PACKAGE}/meshes/hand.dae"/></geometry></visual>'
     limits = {f"{k}{i}": v for i, (lo, hi) in enumerate(LIMITS.values(), 1)
               for k, v in (("l", lo), ("u", hi))}
     (package / "urdf" / "tiny_arm.urdf").write_text(URDF.format(
@@ -138,11 +139,11 @@ def test_vendor_folder_is_untouched_and_meshes_convert_once(vendor):
     root, package, cache = vendor
     build_tracker_model(_config(vendor))
     converted = sorted(cache.glob("*.obj"))
-    assert len(converted) == 4
+    assert len(converted) == 4  # base, upper, fore (shared by two links), hand.dae
     stamps = [p.stat().st_mtime_ns for p in converted]
     build_tracker_model(_config(vendor))
     assert [p.stat().st_mtime_ns for p in sorted(cache.glob("*.obj"))] == stamps
-    assert sorted(p.suffix for p in (package / "meshes").iterdir()) == [".stl"] * 4
+    assert sorted(p.suffix for p in (package / "meshes").iterdir()) == [".dae"] + [".stl"] * 4
 
 
 def test_model_file_path_finds_its_own_package_and_yaml_loads_the_config(vendor):
@@ -198,3 +199,29 @@ def test_unknown_package_and_frame_are_named(vendor):
     bad = {"camera_optical": FrameOffset(parent="no_such_link"), "tool": TOOL}
     with pytest.raises(ValueError, match="'no_such_link' does not exist.*link_3"):
         build_tracker_model(_config(vendor, added_frames=bad))
+
+
+def test_sdf_with_package_uris_loads_the_stl_meshes_triangle_for_triangle(vendor, tmp_path):
+    from drake_tracker.core.geometry import extract_robot_meshes
+
+    root, package, _ = vendor
+    sdf = tmp_path / "two_links.sdf"
+    mesh = f"<geometry><mesh><uri>package://{PACKAGE}/meshes/base.stl</uri></mesh></geometry>"
+    fore = f"<geometry><mesh><uri>package://{PACKAGE}/meshes/fore.stl</uri></mesh></geometry>"
+    sdf.write_text(f"""<?xml version="1.0"?>
+<sdf version="1.7"><model name="two_links">
+  <link name="base"><visual name="v">{mesh}</visual></link>
+  <link name="arm"><pose>0 0 0.1 0 0 0</pose><visual name="v">{fore}</visual></link>
+  <joint name="weld" type="fixed"><parent>world</parent><child>base</child></joint>
+  <joint name="hinge" type="revolute"><parent>base</parent><child>arm</child>
+    <axis><xyz>0 1 0</xyz><limit><lower>-1</lower><upper>1</upper></limit></axis></joint>
+</model></sdf>""")
+    config = _config(vendor, model_file=str(sdf), added_frames={
+        "camera_optical": FrameOffset("base", CAMERA.xyz_m, CAMERA.rpy_deg),
+        "tool": FrameOffset(parent="arm", xyz_m=[0, 0, 0.3])})
+    model = build_tracker_model(config)
+    meshes = extract_robot_meshes(model.plant, model.scene_graph)
+    expected = sum(len(trimesh.load(package / "meshes" / f"{n}.stl").faces)
+                   for n in ("base", "fore"))
+    assert meshes.num_triangles == expected
+    assert model.robot_joint_names == ["hinge"]
