@@ -41,7 +41,7 @@ from drake_tracker.offline import encoders_only_X_CE
 from drake_tracker.params import TrackerParams, load_tracker_params
 from drake_tracker.recording import RecordedRun
 from drake_tracker.robot import build_tracker_model
-from drake_tracker.sim.scenario import load_scenario
+from drake_tracker.sim.scenario import Scenario, load_scenario
 
 DEFAULT_SCENARIO = "s-full-arm/constant"
 
@@ -72,13 +72,12 @@ def first_estimate_mask(run: RecordedRun) -> np.ndarray:
 
 
 def plot_errors(run: RecordedRun, estimates: dict[str, np.ndarray], path: Path,
-                scenario=None) -> Path:
+                scenario: Scenario | None = None) -> Path:
     """PNG of translation (mm) and rotation (deg) error over time on log axes, one line
     per method, from the first estimate on, with the scenario's events marked."""
     from pydrake.common.yaml import yaml_load_typed
 
     from drake_tracker.plots import plot_error_time_series
-    from drake_tracker.sim.scenario import Scenario
 
     if scenario is None:
         scenario = yaml_load_typed(schema=Scenario, data=run.scenario_yaml)
@@ -90,7 +89,7 @@ def plot_errors(run: RecordedRun, estimates: dict[str, np.ndarray], path: Path,
     return plot_error_time_series(run.truth_times_s[keep], errors, scenario, path, title)
 
 
-def demo_hook(meshcat, params: TrackerParams):
+def demo_hook(meshcat, params: TrackerParams) -> Callable:
     """An ``add_systems`` hook: the tracker on the world's ports, and Meshcat views of the
     true world, the encoders-only robot, the estimate, the camera's frustum at its true
     and estimated poses, and the camera's points (placed with the estimated pose)."""
@@ -217,7 +216,7 @@ def _start_meshcat():
         logger.setLevel(level)
 
 
-def run_demo(args, scenario=None, params: TrackerParams | None = None,
+def run_demo(args, scenario: Scenario | None = None, params: TrackerParams | None = None,
              progress: bool = True) -> int:
     """The ``drake-tracker demo`` command (``--scenario``, ``--out``, ``--duration``,
     ``--params``); ``scenario`` and ``params``, when given, were already loaded from

@@ -4,8 +4,12 @@ marks for a scenario's events (bias steps, occlusion, the arm out of view)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from drake_tracker.sim.scenario import Scenario
 
 #: Method identifier -> the name a plot's legend shows.
 METHOD_LABELS: dict[str, str] = {
@@ -29,7 +33,7 @@ def method_label(method: str) -> str:
     return METHOD_LABELS.get(method, method.replace("_", " "))
 
 
-def scenario_events(scenario, t_end: float) -> dict[str, list]:
+def scenario_events(scenario: Scenario, t_end: float) -> dict[str, list]:
     """The times a plot of ``scenario`` up to ``t_end`` should mark:
     ``{"bias_steps": [t, ...], "occluded": [(t0, t1)], "out_of_view": [(t0, t1)]}``."""
     events = {"bias_steps": [], "occluded": [], "out_of_view": []}
@@ -47,7 +51,7 @@ def scenario_events(scenario, t_end: float) -> dict[str, list]:
     return events
 
 
-def mark_scenario_events(ax, scenario, t_end: float) -> None:
+def mark_scenario_events(ax, scenario: Scenario, t_end: float) -> None:
     """Dotted lines at the bias steps, grey spans while occluded or out of view, each
     labelled once for the legend."""
     events = scenario_events(scenario, t_end)
@@ -60,7 +64,7 @@ def mark_scenario_events(ax, scenario, t_end: float) -> None:
                    if k == 0 else None)
 
 
-def plot_error_time_series(times_s: np.ndarray, errors: dict[str, tuple], scenario,
+def plot_error_time_series(times_s: np.ndarray, errors: dict[str, tuple], scenario: Scenario,
                            path: Path, title: str) -> Path:
     """PNG of translation (mm) and rotation (deg) errors over time on log axes, one line
     per method (``errors[method] = (translation_mm, rotation_deg)``), with the
