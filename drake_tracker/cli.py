@@ -51,6 +51,17 @@ class _CommandParser(argparse.ArgumentParser):
         self.set_defaults(_parser=self)
 
 
+class _MessageExit(SystemExit):
+    """Exit code 2, keeping the message for ``str()`` (it was printed already)."""
+
+    def __init__(self, message: str):
+        super().__init__(2)
+        self.message = message
+
+    def __str__(self) -> str:
+        return self.message
+
+
 def _version() -> str:
     from importlib.metadata import PackageNotFoundError, version
 
@@ -299,6 +310,13 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"{command_parser.prog}: interrupted", file=sys.stderr)
         return 130
+    except SystemExit as stop:
+        # A command that stops with a message (``SystemExit("...")``) made the same kind
+        # of one-line error: the same format and exit code 2.
+        if isinstance(stop.code, str) and not args.debug:
+            print(f"{command_parser.prog}: error: {stop.code}", file=sys.stderr)
+            raise _MessageExit(stop.code) from None
+        raise
 
 
 if __name__ == "__main__":

@@ -197,3 +197,11 @@ def test_a_missing_graphviz_is_a_one_line_note(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert (tmp_path / "diagram.dot").read_text() == "digraph {}"
     assert len(err.strip().splitlines()) == 1 and "Graphviz" in err and "diagram.dot" in err
+
+
+def test_a_command_stopping_with_a_message_is_a_one_line_error(tmp_path, capsys):
+    out = tmp_path / "evaluate"
+    code, _, err = run_cli(["evaluate", "--quick", "--methods", "magic", "--out", str(out)],
+                           capsys)
+    assert_one_line_error(code, err, "drake-tracker evaluate: error:", "unknown method 'magic'")
+    assert not out.exists()
