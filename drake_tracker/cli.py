@@ -193,9 +193,9 @@ def _add_scenarios(sub) -> None:
         from drake_tracker.listing import preset_lines
 
         print("\n".join(preset_lines()))
-        print("A bare SEQUENCE means SEQUENCE/constant. A YAML file of "
+        print("A bare SEQUENCE means SEQUENCE/constant. A YAML file of\n"
               "drake_tracker.sim.scenario.Scenario also works; it may start with "
-              "'preset: NAME' and change any field.")
+              "'preset: NAME'.")
         return 0
 
     p.set_defaults(func=run)
