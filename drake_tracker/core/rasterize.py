@@ -142,7 +142,7 @@ def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, 
 @njit(cache=True)
 def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_start,
                 sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
-                planes, fx, fy, cx, cy, near, far, P, UV, poly, rows, span):
+                planes, fx, fy, cx, cy, near, far, P, UV, poly, rows, span, keep):
     """Renders one particle into ``zbuf`` (H, W) float32, which must hold inf (or
     anything farther) where nothing was drawn yet. ``X`` (num_bodies, 4, 4) camera-frame
     body poses. Vertices and triangles are grouped by body (``body_*_start`` delimit
@@ -150,7 +150,8 @@ def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_st
     triangles of closed surfaces facing away from the camera are skipped unless the
     body's sphere reaches the near plane (where clipping can expose back faces, or the
     camera may be inside). ``P`` (V, 3), ``UV`` (V, 3) and ``poly`` (4, 3) are scratch;
-    ``rows`` and ``span`` record the pixels written (see :func:`_raster`)."""
+    ``rows`` and ``span`` record the pixels written (see :func:`_raster`); ``keep`` (T,)
+    bool is scratch."""
     nb = body_tri_start.shape[0] - 1
     for b in range(nb):
         t_begin = body_tri_start[b]
@@ -194,6 +195,39 @@ def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_st
                 UV[i, 0] = fx * x * iz + cx
                 UV[i, 1] = fy * y * iz + cy
                 UV[i, 2] = iz
+        if all_front:
+            # Two passes: a branch-free one over all the body's triangles that keeps the
+            # front faces whose bounding box holds a pixel centre (the same tests as
+            # _raster's early returns; it vectorises), then _raster on those only.
+            H = zbuf.shape[0]
+            W = zbuf.shape[1]
+            w1 = W - 1.0
+            h1 = H - 1.0
+            for t in range(t_begin, t_end):
+                ia = triangles[t, 0]
+                ib = triangles[t, 1]
+                ic = triangles[t, 2]
+                ua = UV[ia, 0]
+                ub = UV[ib, 0]
+                uc = UV[ic, 0]
+                va = UV[ia, 1]
+                vb = UV[ib, 1]
+                vc = UV[ic, 1]
+                front = ((tri_normal[t, 0] * ox + tri_normal[t, 1] * oy
+                          + tri_normal[t, 2] * oz > tri_offset[t]) | (not tri_closed[t]))
+                cols = (max(0.0, np.ceil(min(ua, min(ub, uc))))
+                        <= min(w1, np.floor(max(ua, max(ub, uc)))))
+                rws = (max(0.0, np.ceil(min(va, min(vb, vc))))
+                       <= min(h1, np.floor(max(va, max(vb, vc)))))
+                keep[t] = front & cols & rws
+            for t in range(t_begin, t_end):
+                if keep[t]:
+                    ia = triangles[t, 0]
+                    ib = triangles[t, 1]
+                    ic = triangles[t, 2]
+                    _raster(zbuf, UV[ia, 0], UV[ia, 1], UV[ia, 2], UV[ib, 0], UV[ib, 1],
+                            UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span)
+            continue
         for t in range(t_begin, t_end):
             if all_front and tri_closed[t]:
                 if (tri_normal[t, 0] * ox + tri_normal[t, 1] * oy + tri_normal[t, 2] * oz
@@ -257,6 +291,7 @@ def render_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
         poly = np.empty((4, 3))
         rows = np.empty(2, dtype=np.int64)
         span = np.empty((out.shape[1], 2), dtype=np.int64)
+        keep = np.empty(triangles.shape[0], dtype=np.bool_)
         for n in range(chunk * N // num_chunks, (chunk + 1) * N // num_chunks):
             zbuf = out[n]
             zbuf[:, :] = np.inf
@@ -267,7 +302,7 @@ def render_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
             render_particle(zbuf, X_CB[n], vertices, triangles, body_vertex_start,
                             body_tri_start, sphere_center, sphere_radius, tri_normal,
                             tri_offset, tri_closed, planes, fx, fy, cx, cy, near, far,
-                            P, UV, poly, rows, span)
+                            P, UV, poly, rows, span, keep)
 
 
 def num_chunks(n: int) -> int:

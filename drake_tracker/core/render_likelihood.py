@@ -132,6 +132,7 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
         depths = np.empty(height * width)
         terms = np.empty(height * width)
         work = np.empty((4, height * width))
+        keep = np.empty(triangles.shape[0], dtype=np.bool_)
         for n in range(chunk * N // chunks, (chunk + 1) * N // chunks):
             relative_poses_one(n, q, kind, inboard, outboard, q_index, axis, A, B, rev,
                                frame_body, X_BF, X, X_CB, T, M)
@@ -140,7 +141,7 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
             render_particle(zbuf, X_CB, vertices, triangles, body_vertex_start,
                             body_tri_start, sphere_center, sphere_radius, tri_normal,
                             tri_offset, tri_closed, planes, fx, fy, cx, cy, near, far,
-                            P, UV, poly, rows, span)
+                            P, UV, poly, rows, span, keep)
             count = 0
             for r in range(rows[0], rows[1] + 1):
                 c_lo = span[r, 0]
