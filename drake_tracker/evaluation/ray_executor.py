@@ -41,8 +41,10 @@ def _run_in_ray_worker(function, task, progress_queue) -> tuple[bool, object]:
     one_numba_thread()
 
     def report(message):
+        # Fire and forget: a blocking put (a ray.get inside the task) would lend the
+        # task's CPU to another task meanwhile, and oversubscribe the node.
         try:
-            progress_queue.put_nowait((task.name, message))
+            progress_queue.actor.put_nowait.remote((task.name, message))
         except Exception:  # noqa: BLE001 - progress is best effort
             pass
 

@@ -142,6 +142,18 @@ def _raise_stopped(signum, frame):
     raise TerminatedError(signal.Signals(signum).name)
 
 
+def _stop_signal(error: BaseException) -> BaseException | None:
+    """The KeyboardInterrupt or TerminatedError behind ``error``, if any (a signal that
+    arrives inside Ray's compiled code comes back wrapped in a SystemError)."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt | TerminatedError):
+            return error
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return None
+
+
 def _parse(args) -> list[Task]:
     methods = tuple(args.methods.split(",")) if args.methods else METHODS
     for m in methods:
@@ -188,11 +200,14 @@ def run_evaluate(args) -> int:
             evaluate(tasks, Path(args.out), executor, args.settle_s)
     except ValueError as e:
         raise SystemExit(str(e)) from None
-    except (KeyboardInterrupt, TerminatedError) as e:
+    except BaseException as e:
+        stop = _stop_signal(e)
+        if stop is None:
+            raise
         done = sum(ResultStore(Path(args.out)).is_done(t) for t in tasks)
-        print(f"\nstopped ({e or 'Ctrl-C'}): {done} of {len(tasks)} tasks have results in "
+        print(f"\nstopped ({stop or 'Ctrl-C'}): {done} of {len(tasks)} tasks have results in "
               f"{args.out}; the same command resumes", flush=True)
-        return 143 if isinstance(e, TerminatedError) else 130
+        return 143 if isinstance(stop, TerminatedError) else 130
     finally:
         signal.signal(signal.SIGTERM, previous)
     failures = json.loads((Path(args.out) / "failures.json").read_text())
