@@ -129,6 +129,12 @@ def _threading_layer() -> str:
         return str(numba.config.THREADING_LAYER)
 
 
+def _python_share(robot: dict) -> float:
+    one = robot["threads"]["1"]
+    return 100.0 * one["python_us_per_block"] * robot["block_calls_per_update"] * 1e-6 / (
+        one["seconds"])
+
+
 def format_bench(result: dict) -> str:
     """A human-readable summary of ``bench.json``."""
     w, h = result["image_size"]
@@ -145,7 +151,8 @@ def format_bench(result: dict) -> str:
             "  us per evaluation (1 thread): " + ", ".join(
                 f"{k} {v:.1f}" for k, v in stages.items()),
             f"  CPF Python outside the kernel: {r['threads']['1']['python_us_per_block']:.0f}"
-            f" us per block call x {r['block_calls_per_update']}",
+            f" us per block call x {r['block_calls_per_update']} = "
+            f"{_python_share(r):.0f} % of an update (1 thread)",
             f"  Drake RenderEngineVtk {r['drake_us_per_image']:.0f} us per image: "
             f"{r['drake_over_score']:.0f}x a fused evaluation, "
             f"{r['drake_over_render']:.0f}x a batched render; agreement: labels "

@@ -6,10 +6,9 @@ update (particles per block x blocks x annealing layers):
 * ``updates_per_s``: whole CPF image updates per second, per numba thread count;
 * ``python_us_per_block``: the part of an update spent outside the scoring kernel
   (the CPF's Python: sampling, weights, resampling, moments), per block call;
-* ``stage_us_per_evaluation``: ``fk`` (batched forward kinematics), ``render`` (FK
-  excluded, images written to memory), ``score`` (what the filter runs: FK, rasterising and
-  the pixel likelihood fused), ``likelihood`` (score - fk - render, the pixel term and the
-  scan of the robot's pixels), all called with the CPF's batch size, one thread;
+* ``stage_us_per_evaluation``: ``fk``, ``raster``, ``likelihood``, ``score`` (what the
+  filter runs: the three fused) and ``render`` (images written to memory), CPU time, one
+  thread, called with the CPF's batch size (see :func:`_stages`);
 * ``drake_us_per_image``: Drake's RenderEngineVtk on the same configurations (one
   ``RenderDepthImage`` each, scoring excluded), and its ratio to ``score``;
 * agreement of the rendered images with Drake's (robot/background label, depth);
@@ -114,8 +113,7 @@ def bench_robot(model, camera: CameraIntrinsics, params: TrackerParams, repeats:
             numba.set_num_threads(min(t, numba.config.NUMBA_NUM_THREADS))
             per_threads[str(t)] = time_updates(update, observation, prior, repeats)
         numba.set_num_threads(1)
-        stages = _stages(renderer, observation, view, update.num_particles,
-                         update.evaluations_per_image, repeats)
+        stages = _stages(update, observation, view, repeats)
     finally:
         numba.set_num_threads(previous)
     drake = _against_drake(model, renderer, num_drake)
@@ -141,27 +139,38 @@ def _full_resolution(image: np.ndarray, stride: int) -> np.ndarray:
     return np.repeat(np.repeat(image, stride, axis=0), stride, axis=1)
 
 
-def _stages(renderer, observation, view, batch: int, evaluations: int, repeats: int) -> dict:
-    """µs per evaluation of each stage, called in batches of the CPF's size, 1 thread."""
+def _stages(update: CpfImageUpdate, observation, view, repeats: int) -> dict:
+    """µs per evaluation of each stage, called in batches of the CPF's size, 1 thread:
+    ``fk`` (the batched FK call alone), ``raster`` (the fused kernel against an image with
+    a single valid pixel, away from the robot: FK, rasterising and the pixel scan, minus
+    ``fk``), ``likelihood`` (``score`` minus that), ``score`` (the fused kernel as the
+    filter runs it), and ``render`` (FK excluded, images written to memory)."""
+    from drake_tracker.core.likelihood import prepare_observation
+
+    renderer = update.renderer
+    evaluations = update.evaluations_per_image
     q = random_configurations(renderer.model, evaluations, seed=1, spread_rad=0.02,
                               center=view)
-    chunks = [q[i:i + batch] for i in range(0, len(q), batch)]
+    chunks = [q[i:i + update.num_particles] for i in range(0, len(q), update.num_particles)]
     frame = renderer.model.camera_frame
     poses = [renderer.kinematics.relative_poses(c, frame) for c in chunks]
-    renderer.score(chunks[0], observation)
-    renderer.render_camera_poses(poses[0])
+    one_pixel = np.full(observation.shape, np.nan, dtype=np.float32)
+    one_pixel[0, 0] = 1.0
+    nearly_empty = prepare_observation(one_pixel, update.likelihood)
 
     def each(fn, items):
         return lambda: [fn(x) for x in items]
 
-    fk = _best_cpu_and_wall(each(lambda c: renderer.kinematics.relative_poses(c, frame),
-                                 chunks), repeats)[1]
-    render = _best_cpu_and_wall(each(renderer.render_camera_poses, poses), repeats)[1]
-    score = _best_cpu_and_wall(each(lambda c: renderer.score(c, observation), chunks),
-                               repeats)[1]
-    us = 1e6 / evaluations
-    return {"fk": fk * us, "render": render * us, "score": score * us,
-            "likelihood": max(0.0, score - fk - render) * us}
+    def cpu(fn, items):
+        fn(items[0])
+        return _best_cpu_and_wall(each(fn, items), repeats)[1] * 1e6 / evaluations
+
+    fk = cpu(lambda c: renderer.kinematics.relative_poses(c, frame), chunks)
+    fk_raster = cpu(lambda c: renderer.score(c, nearly_empty), chunks)
+    score = cpu(lambda c: renderer.score(c, observation), chunks)
+    render = cpu(renderer.render_camera_poses, poses)
+    return {"fk": fk, "raster": max(0.0, fk_raster - fk),
+            "likelihood": max(0.0, score - fk_raster), "score": score, "render": render}
 
 
 def _against_drake(model, renderer, num: int) -> dict:

@@ -1,0 +1,25 @@
+"""The likelihood part of ``drake-tracker bench`` reports what it documents (no timing
+assertions: only that the figures exist, are positive, and the renderings agree)."""
+
+import numpy as np
+
+from drake_tracker.bench_likelihood import bench_robot
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.params import TrackerParams
+from drake_tracker.robot import build_tracker_model, robot_preset
+
+
+def test_bench_robot_reports_its_figures():
+    model = build_tracker_model(robot_preset("apollo"))
+    camera = CameraIntrinsics.from_fov(640, 480, np.radians(45.0))
+    result = bench_robot(model, camera, TrackerParams(), repeats=1, num_drake=3)
+    assert result["evaluations"] >= 2000
+    assert set(result["threads"]) == {"1", "2"}
+    for figures in result["threads"].values():
+        assert figures["updates_per_s"] > 0 and figures["python_us_per_block"] >= 0
+    stages = result["stage_us_per_evaluation"]
+    assert set(stages) == {"fk", "raster", "likelihood", "score", "render"}
+    assert all(np.isfinite(v) and v >= 0 for v in stages.values())
+    assert result["drake_us_per_image"] > 0
+    assert result["label_agreement_vs_drake"] >= 0.98
+    assert result["triangles_rendered"] == result["triangles_source"] == 1176
