@@ -1,7 +1,7 @@
 """A vendor's robot as it ships: the Franka Panda of the PyPI package example-robot-data.
 
 Run: pip install 'drake_tracker[meshes]' example-robot-data
-     python examples/vendor_robot.py [--duration 4] [--share DIR]
+     python examples/vendor_robot.py [--duration 2] [--share DIR]
 
 The package installs the Panda's ROS description under
 ``<site-packages>/cmeel.prefix/share/example-robot-data``: a URDF whose meshes are
@@ -74,7 +74,7 @@ def render_agreement(config: RobotConfig) -> None:
 def main() -> None:
     """Loads the Panda, compares the renderers, tracks it."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--duration", type=float, default=4.0)
+    parser.add_argument("--duration", type=float, default=2.0)
     parser.add_argument("--share", type=Path, help="example-robot-data's share folder",
                         default=Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix"
                         / "share" / "example-robot-data")
@@ -87,11 +87,7 @@ def main() -> None:
     home = default_home_positions(model.plant, model.robot_joint_names)
     robot = RobotMotion(config, dict(zip(model.robot_joint_names, home, strict=True)),
                         moved=PANDA_ARM, biased=PANDA_ARM)
-    # The Panda's CAD meshes cost more to render than Apollo's: fewer particles.
-    params = TrackerParams()
-    params.image.num_particles = 25
-    params.image.annealing_betas = [0.03, 0.3, 1.0]
-    demo = build("32F", args.duration, seed=0, robot=robot, params=params)
+    demo = build("32F", args.duration, seed=0, robot=robot, params=TrackerParams())
     times = np.arange(0.5, args.duration + 1e-9, 0.5)
     print_errors(times, hand_errors_mm(demo, times))
 
