@@ -7,13 +7,14 @@ from pydrake.common.value import AbstractValue
 from pydrake.perception import BaseField, Fields, PointCloud
 from pydrake.systems.framework import LeafSystem
 
-from drake_tracker.core.camera import CameraIntrinsics, stride_for_width, subsample
+from drake_tracker.core.camera import CameraIntrinsics, as_intrinsics, stride_for_width, subsample
 from drake_tracker.core.frames import DepthFrame
 
 
 class DepthFrameToPointCloud(LeafSystem):
     """Back-projects the latest depth frame, subsampled to about ``width_px`` wide, into
     a point cloud in the camera frame (+z forward); invalid pixels are dropped.
+    ``camera``: the frames' intrinsics, or Drake's ``CameraInfo`` / ``DepthRenderCamera``.
 
     .. pydrake_system::
 
@@ -26,6 +27,7 @@ class DepthFrameToPointCloud(LeafSystem):
 
     def __init__(self, camera: CameraIntrinsics, width_px: int = 160):
         super().__init__()
+        camera = as_intrinsics(camera)
         self._stride = stride_for_width(camera.width, width_px)
         small = camera.subsampled(self._stride)
         v, u = np.mgrid[0:small.height, 0:small.width]
