@@ -148,6 +148,7 @@ def format_bench(result: dict) -> str:
             f"{name}: {r['triangles_source']} triangles ({r['triangles_rendered']} rendered)",
             f"  image updates/s at {r['evaluations']} evaluations: {threads}"
             "   (target >= 30 on one thread)",
+            f"  per second of CPU time, 1 thread: {r['threads']['1']['updates_per_cpu_s']:.1f}",
             "  us per evaluation (1 thread): " + ", ".join(
                 f"{k} {v:.1f}" for k, v in stages.items()),
             f"  CPF Python outside the kernel: {r['threads']['1']['python_us_per_block']:.0f}"
