@@ -1,7 +1,9 @@
 """Meshes Drake cannot load (STL, DAE, PLY, ...) converted once to OBJ in a cache folder.
 
 Drake 1.51 renders OBJ and glTF meshes and builds convex hulls from OBJ, VTK and glTF,
-but rejects STL and DAE, the usual formats of a vendor's robot package. The conversion
+but rejects STL and DAE, the usual formats of a vendor's robot package; the tracker's
+batched renderer reads OBJ only (``core/geometry.py``), so every other format is
+converted. The conversion
 goes through `trimesh <https://trimesh.org>`_ (and ``pycollada`` for DAE), the optional
 ``meshes`` extra: ``pip install 'drake_tracker[meshes]'``. The OBJ carries vertex
 normals (Drake's OBJ reader needs them) and no materials: colours come from the model.
@@ -17,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-#: Mesh suffixes Drake loads itself, for every role (no conversion).
+#: Mesh suffixes kept as they are (Drake and the batched renderer both read them).
 DRAKE_MESH_SUFFIXES = (".obj",)
 #: Bumped when the conversion changes, so that old cache entries are not reused.
 CONVERTER_VERSION = 1
