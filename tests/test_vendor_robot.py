@@ -225,3 +225,12 @@ def test_sdf_with_package_uris_loads_the_stl_meshes_triangle_for_triangle(vendor
                    for n in ("base", "fore"))
     assert meshes.num_triangles == expected
     assert model.robot_joint_names == ["hinge"]
+
+
+def test_a_missing_mesh_file_is_named(vendor, tmp_path):
+    root, package, _ = vendor
+    urdf = tmp_path / "broken.urdf"
+    urdf.write_text((package / "urdf" / "tiny_arm.urdf").read_text().replace(
+        "meshes/hand.dae", "meshes/lost_hand.stl"))
+    with pytest.raises(FileNotFoundError, match="lost_hand.stl"):
+        build_tracker_model(_config(vendor, model_file=str(urdf)))
