@@ -187,14 +187,15 @@ def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_st
             x = X[b, 0, 0] * px + X[b, 0, 1] * py + X[b, 0, 2] * pz + X[b, 0, 3]
             y = X[b, 1, 0] * px + X[b, 1, 1] * py + X[b, 1, 2] * pz + X[b, 1, 3]
             z = X[b, 2, 0] * px + X[b, 2, 1] * py + X[b, 2, 2] * pz + X[b, 2, 3]
-            P[i, 0] = x
-            P[i, 1] = y
-            P[i, 2] = z
             if all_front:
                 iz = 1.0 / z
                 UV[i, 0] = fx * x * iz + cx
                 UV[i, 1] = fy * y * iz + cy
                 UV[i, 2] = iz
+            else:
+                P[i, 0] = x
+                P[i, 1] = y
+                P[i, 2] = z
         if all_front:
             # Two passes: a branch-free one over all the body's triangles that keeps the
             # front faces whose bounding box holds a pixel centre (the same tests as
