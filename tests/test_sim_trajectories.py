@@ -70,7 +70,8 @@ def test_limit_check_names_the_joint():
 
 def test_every_preset_is_valid_and_within_joint_limits():
     presets = list_presets()
-    assert len(presets) == 36
+    # 15 sequences (12 of the paper, two heavy occlusions, one model mismatch) x 4 biases.
+    assert len(presets) == 60
     model = build_tracker_model(load_scenario("static/none").resolved_robot_config())
     names = model.robot_joint_names
     lower = model.plant.GetPositionLowerLimits()[:len(names)]
@@ -82,3 +83,5 @@ def test_every_preset_is_valid_and_within_joint_limits():
         check_within_limits(traj.positions(np.arange(0.0, s.duration_s, 0.05)), lower, upper,
                             names)
     validate_scenario(load_scenario("occlusion/time-varying"))
+    validate_scenario(load_scenario("occlusion-heavy/ramp"))
+    validate_scenario(load_scenario("s-head-arm-mismatch/constant"))

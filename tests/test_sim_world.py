@@ -300,12 +300,13 @@ def test_bad_scenario_values_name_the_field(mutate, field):
 
 
 def test_unknown_preset_and_camera_frame_are_rejected():
-    from drake_tracker.sim.scenario import RobotModelConfig, validate_scenario
+    from drake_tracker.robot import RobotConfig
+    from drake_tracker.sim.scenario import validate_scenario
 
     with pytest.raises(ValueError, match="unknown scenario preset 's-nothing/constant'"):
         load_scenario("s-nothing/constant")
     s = load_scenario("static/none")
-    s.robot_config = RobotModelConfig(camera_frame="no_such_camera")
+    s.robot_config = RobotConfig(camera_frame="no_such_camera")
     with pytest.raises(ValueError, match="camera_frame.*no_such_camera"):
         validate_scenario(s)
 

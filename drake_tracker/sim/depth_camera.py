@@ -44,8 +44,8 @@ from pydrake.systems.sensors import ImageDepth32F, RgbdSensor
 
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
-from drake_tracker.sim.encoders import counter_generator
-from drake_tracker.sim.scenario import CameraConfig
+from drake_tracker.sim.config import CameraConfig
+from drake_tracker.sim.streams import counter_generator
 
 #: Name of the renderer the simulated camera uses.
 RENDERER_NAME = "sim_vtk"

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.sim.scenario import RobotProfile, TrajectoryConfig
+from drake_tracker.sim.config import TrajectoryConfig
+from drake_tracker.sim.profiles import RobotProfile
 
 
 def smooth_window(t: np.ndarray, start_s: float, duration_s: float, ramp_s: float) -> np.ndarray:

@@ -1,0 +1,59 @@
+"""Ground truth of the simulated world, read from the WORLD plant's positions."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame
+from pydrake.systems.framework import LeafSystem
+
+from drake_tracker.robot import VIRTUAL_JOINT_NAMES, joint_names
+
+
+class TruthSystem(LeafSystem):
+    """Ground truth from the plant's positions.
+
+    .. pydrake_system::
+
+        name: TruthSystem
+        input_ports:
+        - positions
+        output_ports:
+        - true_position
+        - true_camera_offset
+        - true_X_CE
+
+    ``true_position`` (n): the robot joints (rad), order ``robot_joint_names``;
+    ``true_camera_offset`` (6): the virtual joints [x y z (m), rx ry rz (rad)];
+    ``true_X_CE``: AbstractValue[RigidTransform], the end effector in the TRUE camera
+    frame (m), both frames of ``plant`` (the world's robot, which may differ from the
+    tracker's model).
+    """
+
+    def __init__(self, plant: MultibodyPlant, robot_joint_names: list[str],
+                 camera_frame: Frame, end_effector_frame: Frame):
+        super().__init__()
+        self._plant = plant
+        self._context = plant.CreateDefaultContext()
+        names = joint_names(plant)
+        self._robot_idx = np.array([names.index(n) for n in robot_joint_names])
+        self._virtual_idx = np.array([names.index(n) for n in VIRTUAL_JOINT_NAMES])
+        self._camera_frame = camera_frame
+        self._ee_frame = end_effector_frame
+        self._positions = self.DeclareVectorInputPort("positions", plant.num_positions())
+        self.DeclareVectorOutputPort("true_position", len(self._robot_idx),
+                                     lambda c, o: o.SetFromVector(self._q(c)[self._robot_idx]))
+        self.DeclareVectorOutputPort(
+            "true_camera_offset", 6, lambda c, o: o.SetFromVector(self._q(c)[self._virtual_idx]))
+        self.DeclareAbstractOutputPort("true_X_CE", lambda: AbstractValue.Make(RigidTransform()),
+                                       self._calc_X_CE)
+
+    def _q(self, context) -> np.ndarray:
+        return self._positions.Eval(context)
+
+    def _calc_X_CE(self, context, output):
+        self._plant.SetPositions(self._context, self._q(context))
+        output.set_value(self._plant.CalcRelativeTransform(self._context, self._camera_frame,
+                                                           self._ee_frame))
