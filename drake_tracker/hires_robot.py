@@ -1,7 +1,7 @@
 """The robot with CAD-like meshes used by the bench and the level-of-detail tests.
 
 Apollo's links, joints and frames with every visual an OBJ mesh as a CAD export gives it
-(``write_apollo_hires`` in ``models/generate_models.py``): 54,720 triangles by default,
+(``write_apollo_hires`` in ``models/generate_hires.py``): 54,720 triangles by default,
 about 19k with the small settings the tests use. Written on demand into a folder (a
 temporary one by default), so no large mesh files are shipped.
 """
@@ -12,7 +12,7 @@ import dataclasses
 import tempfile
 from pathlib import Path
 
-from drake_tracker.models.generate_models import write_apollo_hires
+from drake_tracker.models.generate_hires import write_apollo_hires
 from drake_tracker.robot import TrackerModel, build_tracker_model, robot_preset
 
 #: Tessellation of the bench's real-mesh robot (>= 40k triangles) and of the tests' one.

@@ -10,7 +10,7 @@ planes it stands for) stays below the tolerance squared, so the surface moves by
 than the tolerance. A body keeps its original mesh when simplification would not at least
 halve its triangles (Drake's primitives, tessellated coarsely already).
 
-Measured on the generated CAD-like Apollo (``models/generate_models.py``,
+Measured on the generated CAD-like Apollo (``models/generate_hires.py``,
 ``write_apollo_hires``, 54,720 triangles): 10,360 triangles at 80x60, 12,058 at 160x120;
 against Drake's RenderEngineVtk on the full meshes, well within the tested agreement
 (``tests/test_level_of_detail.py``). The library refuses collapses that would leave
