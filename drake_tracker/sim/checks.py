@@ -174,6 +174,8 @@ def _check_mismatch(m: ModelMismatchConfig) -> None:
     require_non_negative(m.joint_origin_deg, "model_mismatch.joint_origin_deg")
     require_positive(m.cable_radius_m, "model_mismatch.cable_radius_m")
     require_non_negative(m.cable_offset_m, "model_mismatch.cable_offset_m")
+    require(is_number(m.cable_angle_deg), "model_mismatch.cable_angle_deg", m.cable_angle_deg,
+            "must be a finite number")
     require_positive(m.hand_scale, "model_mismatch.hand_scale")
     require(isinstance(m.seed, int) and m.seed >= 0, "model_mismatch.seed", m.seed,
             "must be a non-negative integer")

@@ -241,6 +241,9 @@ class ModelMismatchConfig:
     #: Cable radius (m) and its distance from the link's axis (m).
     cable_radius_m: float = 0.01
     cable_offset_m: float = 0.075
+    #: Which side of the link: this angle about the link's axis from its x axis (deg);
+    #: 180 is the side of Apollo's arm links that its camera sees.
+    cable_angle_deg: float = 180.0
     #: The end effector's body (the hand) is drawn this much larger (about its origin).
     hand_scale: float = 1.0
     #: Seed of the joint perturbations.

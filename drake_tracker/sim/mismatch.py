@@ -20,7 +20,17 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.eigen_geometry import AngleAxis
-from pydrake.geometry import Box, Capsule, Convex, Cylinder, Ellipsoid, Mesh, SceneGraph, Sphere
+from pydrake.geometry import (
+    Box,
+    Capsule,
+    Convex,
+    Cylinder,
+    Ellipsoid,
+    Mesh,
+    Role,
+    SceneGraph,
+    Sphere,
+)
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
@@ -62,7 +72,7 @@ def joint_origin_errors(names: list[str], config: ModelMismatchConfig) -> dict:
 
 def _move_joint_origin(plant: MultibodyPlant, joint, X_FF: RigidTransform) -> None:
     instance, name = joint.model_instance(), joint.name()
-    for index in plant.GetJointActuatorIndices(instance):
+    for index in plant.GetJointActuatorIndices():  # (the per-instance list is empty here)
         if plant.get_joint_actuator(index).joint().index() == joint.index():
             plant.RemoveJointActuator(plant.get_joint_actuator(index))
     parent, child = joint.frame_on_parent(), joint.frame_on_child()
@@ -108,15 +118,19 @@ def cable_segments(plant: MultibodyPlant, end_effector_body) -> list:
         body = parent
 
 
-def _cylinder_between(start: np.ndarray, end: np.ndarray, offset_m: float) -> RigidTransform:
-    """Pose of a cylinder (axis z) from ``start`` to ``end``, moved ``offset_m`` sideways
-    (along the body's x axis made perpendicular to the segment, else its y axis)."""
+def _cylinder_between(start: np.ndarray, end: np.ndarray, offset_m: float,
+                      angle_deg: float) -> RigidTransform:
+    """Pose of a cylinder (axis z) from ``start`` to ``end``, moved ``offset_m`` sideways:
+    along the body's x axis made perpendicular to the segment (else its y axis), turned
+    ``angle_deg`` about the segment."""
     axis = (end - start) / np.linalg.norm(end - start)
     for guess in (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])):
         side = guess - axis * (guess @ axis)
         if np.linalg.norm(side) > 0.3:
             break
     side /= np.linalg.norm(side)
+    angle = np.radians(angle_deg)
+    side = np.cos(angle) * side + np.sin(angle) * np.cross(axis, side)
     rotation = np.column_stack([side, np.cross(axis, side), axis])
     return RigidTransform(RotationMatrix(rotation), 0.5 * (start + end) + offset_m * side)
 
@@ -150,7 +164,8 @@ def _diffuse(scene_graph: SceneGraph, geometry_id) -> np.ndarray:
 
 def _scale_hand(plant: MultibodyPlant, scene_graph: SceneGraph, body, scale: float) -> None:
     inspector = scene_graph.model_inspector()
-    for k, geometry_id in enumerate(plant.GetVisualGeometriesForBody(body)):
+    frame_id = plant.GetBodyFrameIdOrThrow(body.index())
+    for k, geometry_id in enumerate(inspector.GetGeometries(frame_id, Role.kIllustration)):
         X_BG = inspector.GetPoseInFrame(geometry_id)
         shape = scaled_shape(inspector.GetShape(geometry_id), scale)
         X_scaled = RigidTransform(X_BG.rotation(), scale * X_BG.translation())
@@ -168,7 +183,7 @@ def apply_model_mismatch(plant: MultibodyPlant, scene_graph: SceneGraph,
     if config.cable:
         for k, (body, start, end) in enumerate(cable_segments(plant, end_effector_body)):
             plant.RegisterVisualGeometry(
-                body, _cylinder_between(start, end, config.cable_offset_m),
+                body, _cylinder_between(start, end, config.cable_offset_m, config.cable_angle_deg),
                 Cylinder(config.cable_radius_m, float(np.linalg.norm(end - start))),
                 f"mismatch_cable_{k}", CABLE_RGBA)
     if config.hand_scale != 1.0:

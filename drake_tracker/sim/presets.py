@@ -42,11 +42,12 @@ HEAVY_OCCLUSION_WINDOW = (0.25, 0.75)
 
 
 def heavy_occluder(duration_s: float, lasting: bool) -> OccluderSpec:
-    """A 0.5 x 0.36 x 0.34 m box fixed in the world between Apollo's camera (home pose)
-    and its upper arm, from 25 % of ``duration_s`` to 75 % (or to the end)."""
+    """A 4 x 26 x 26 cm plate fixed in the world 35 cm in front of Apollo's camera, facing
+    it, between the camera and the upper arm (it hides 74-97 % of the arm's pixels of
+    ``s-full-arm``), from 25 % of ``duration_s`` to 75 % (or to the end)."""
     enter, leave = HEAVY_OCCLUSION_WINDOW
-    return OccluderSpec(shape="box", size_m=[0.06, 0.40, 0.34], motion="world",
-                        xyz_m=[0.42, -0.22, 1.02], rpy_deg=[0.0, -35.0, 0.0],
+    return OccluderSpec(shape="box", size_m=[0.04, 0.26, 0.26], motion="world",
+                        xyz_m=[0.396, -0.061, 1.209], rpy_deg=[0.0, 29.3, 0.0],
                         enter_s=enter * duration_s,
                         leave_s=float("inf") if lasting else leave * duration_s,
                         rgba=[0.3, 0.3, 0.8, 1.0])

@@ -13,10 +13,21 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import MultibodyForces
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from drake_tracker.robot import VIRTUAL_JOINT_NAMES, joint_names
+from drake_tracker.robot import VIRTUAL_JOINT_NAMES
 from drake_tracker.sim.config import Scenario
 from drake_tracker.sim.trajectories import JointTrajectory
 from drake_tracker.sim.validation import require
+
+
+def position_joint_names(plant: MultibodyPlant) -> list[str]:
+    """Names of the plant's single-DoF joints in position-vector order (as
+    ``drake_tracker.robot.joint_names``, but also for a plant with removed joints)."""
+    joints = [plant.get_joint(index) for index in plant.GetJointIndices()]
+    joints = sorted((j for j in joints if j.num_positions() == 1),
+                    key=lambda j: j.position_start())
+    require(len(joints) == plant.num_positions(), "world plant", plant.num_positions(),
+            "only single-DoF joints (revolute, prismatic) are supported")
+    return [j.name() for j in joints]
 
 
 def offset_gain_matrix(scenario: Scenario, robot_joint_names: list[str]) -> np.ndarray:
@@ -35,7 +46,7 @@ class ReferenceMotion:
     def __init__(self, plant: MultibodyPlant, scenario: Scenario, trajectory: JointTrajectory,
                  robot_joint_names: list[str]):
         self._trajectory = trajectory
-        names = joint_names(plant)
+        names = position_joint_names(plant)
         self._robot_idx = np.array([names.index(n) for n in robot_joint_names])
         self._virtual_idx = np.array([names.index(n) for n in VIRTUAL_JOINT_NAMES])
         self._offset = np.asarray(scenario.camera.offset, float)

@@ -9,7 +9,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame
 from pydrake.systems.framework import LeafSystem
 
-from drake_tracker.robot import VIRTUAL_JOINT_NAMES, joint_names
+from drake_tracker.robot import VIRTUAL_JOINT_NAMES
+from drake_tracker.sim.reference import position_joint_names
 
 
 class TruthSystem(LeafSystem):
@@ -37,7 +38,7 @@ class TruthSystem(LeafSystem):
         super().__init__()
         self._plant = plant
         self._context = plant.CreateDefaultContext()
-        names = joint_names(plant)
+        names = position_joint_names(plant)
         self._robot_idx = np.array([names.index(n) for n in robot_joint_names])
         self._virtual_idx = np.array([names.index(n) for n in VIRTUAL_JOINT_NAMES])
         self._camera_frame = camera_frame

@@ -40,7 +40,6 @@ from drake_tracker.robot import (
     add_robot,
     add_virtual_camera_joints,
     build_tracker_model,
-    joint_names,
 )
 from drake_tracker.sim.config import Scenario, scenario_occluders
 from drake_tracker.sim.depth_camera import AddDepthCamera, DepthCameraSystem
@@ -53,6 +52,7 @@ from drake_tracker.sim.reference import (
     InverseDynamicsTracking,
     ReferenceMotion,
     TrajectoryPlayback,
+    position_joint_names,
 )
 from drake_tracker.sim.trajectories import (
     JointTrajectory,
@@ -231,7 +231,7 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
     }
     return SimulatedWorld(
         scenario=scenario, robot_config=config, plant=plant, scene_graph=scene_graph,
-        model=model, robot_joint_names=robot_names, plant_joint_names=joint_names(plant),
+        model=model, robot_joint_names=robot_names, plant_joint_names=position_joint_names(plant),
         camera_frame=camera_frame, end_effector_frame=ee_frame,
         intrinsics=camera.intrinsics, trajectory=trajectory, reference=reference,
         encoders=encoders, camera=camera, truth=truth, occluders=occluders, ports=ports,
