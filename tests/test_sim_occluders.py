@@ -178,3 +178,22 @@ def test_occluders_load_from_yaml_and_errors_name_the_field(tmp_path):
         path.write_text("preset: static/none\noccluders:\n" + entry)
         with pytest.raises(ValueError, match=field.replace(".", r"\.").replace("[", r"\[")):
             load_scenario(path)
+
+
+def test_a_shortened_run_keeps_every_event_in_it():
+    from drake_tracker.sim.timing import shorten_scenario
+
+    heavy = shorten_scenario(load_scenario("occlusion-heavy/ramp"), 10.0)
+    o = heavy.occluders[0]
+    assert (heavy.duration_s, o.enter_s, o.leave_s) == (10.0, 2.5, 7.5)
+    assert heavy.encoders.ramp_duration_s == pytest.approx(10.0 / 3)
+    assert shorten_scenario(load_scenario("occlusion-lasting/none"), 10.0).occluders[0].leave_s \
+        == np.inf
+    # The legacy events: as the evaluation compressed them before.
+    legacy = shorten_scenario(load_scenario("occlusion/time-varying"), 10.0)
+    assert (legacy.occluder.start_s, legacy.occluder.end_s) == (2.5, 8.5)
+    assert (legacy.encoders.step_period_s, legacy.encoders.step_transition_s) == (3.0, 1.0)
+    out = shorten_scenario(load_scenario("in-out-in/none"), 10.0).trajectory
+    assert (out.excursion_start_s, out.excursion_ramp_s, out.excursion_duration_s) == (
+        2.0, 1.0, 4.0)
+    assert shorten_scenario(load_scenario("static/none"), 60.0).duration_s == 30.0
