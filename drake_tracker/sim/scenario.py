@@ -35,7 +35,9 @@ from drake_tracker.sim.config import (
     scenario_occluders,
 )
 from drake_tracker.sim.presets import (
+    ALL_SEQUENCES,
     BIAS_VARIANTS,
+    EXTRA_SEQUENCES,
     MISMATCH_SUFFIX,
     SEQUENCES,
     list_presets,
@@ -44,8 +46,9 @@ from drake_tracker.sim.presets import (
 from drake_tracker.sim.profiles import ROBOT_PROFILES, RobotProfile, robot_profile
 
 __all__ = [
-    "BIAS_KINDS", "BIAS_PROFILE_KINDS", "BIAS_VARIANTS", "CAMERA_CLOCKS", "MISMATCH_SUFFIX",
-    "MODES", "OCCLUDER_MOTIONS", "OCCLUDER_SHAPES", "ROBOT_PROFILES", "SEQUENCES",
+    "ALL_SEQUENCES", "BIAS_KINDS", "BIAS_PROFILE_KINDS", "BIAS_VARIANTS", "CAMERA_CLOCKS",
+    "EXTRA_SEQUENCES", "MISMATCH_SUFFIX", "MODES", "OCCLUDER_MOTIONS", "OCCLUDER_SHAPES",
+    "ROBOT_PROFILES", "SEQUENCES",
     "TRAJECTORY_KINDS", "BiasProfile", "CameraConfig", "EncoderConfig",
     "ModelMismatchConfig", "OccluderConfig", "OccluderSpec", "RobotProfile", "Scenario",
     "TrajectoryConfig", "list_presets", "load_scenario", "occlusion_windows",
