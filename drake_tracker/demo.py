@@ -11,10 +11,11 @@ Writes to ``--out`` (default ``out/demo``):
 * ``errors.png``: translation and rotation error of each method over time, log axes,
   with the scenario's bias steps, occlusion and out-of-view windows marked;
 * ``meshcat.html``: a standalone Meshcat recording, all in one scene: the true robot in
-  its colours, the robot where the raw (biased) encoders put it (translucent blue),
-  the tracker's estimate (translucent green), the camera's frustum at its true pose
-  (black) and at the estimated one (green), the depth camera's points placed with the
-  estimated camera pose (magenta), and a legend;
+  its colours, the robot where the raw (biased) encoders put it (translucent blue) and
+  the tracker's estimate (translucent green), each placed so that its own camera is the
+  real camera (so its hand shows the hand pose in the camera frame, what the errors
+  measure), the camera's frustum at its true pose (black) and at the estimated one
+  (green), the depth camera's points (magenta), and a legend;
 * ``diagram.dot`` (and ``diagram.png`` where Graphviz's ``dot`` is installed, else a
   one-line note): the Diagram's structure.
 
@@ -91,8 +92,9 @@ def plot_errors(run: RecordedRun, estimates: dict[str, np.ndarray], path: Path,
 
 def demo_hook(meshcat, params: TrackerParams) -> Callable:
     """An ``add_systems`` hook: the tracker on the world's ports, and Meshcat views of the
-    true world, the encoders-only robot, the estimate, the camera's frustum at its true
-    and estimated poses, and the camera's points (placed with the estimated pose)."""
+    true world, the encoders-only robot and the estimate (each moved so that its camera is
+    the real camera), the camera's frustum at its true and estimated poses, and the
+    camera's points."""
     from pydrake.geometry import (
         MeshcatPointCloudVisualizer,
         MeshcatVisualizer,
@@ -129,13 +131,14 @@ def demo_hook(meshcat, params: TrackerParams) -> Callable:
                                        ConstantVectorSource(np.zeros(6)))
         builder.Connect(world.port("measured_position"), mux.get_input_port(0))
         builder.Connect(zeros.get_output_port(), mux.get_input_port(1))
-        AddGhostRobot(builder, world.robot_config, meshcat, mux.get_output_port(),
-                      "encoders_only", ENCODERS_RGBA)
-        AddGhostRobot(builder, world.robot_config, meshcat,
-                      tracker.port("estimated_position"), "estimate", ESTIMATE_RGBA)
         true_camera = builder.AddNamedSystem(
             "true_camera_pose", FramePoseInWorld(world.plant, world.camera_frame))
         builder.Connect(world.port("plant_positions"), true_camera.get_input_port())
+        AddGhostRobot(builder, world.robot_config, meshcat, mux.get_output_port(),
+                      "encoders_only", ENCODERS_RGBA, camera_pose=true_camera.get_output_port())
+        AddGhostRobot(builder, world.robot_config, meshcat,
+                      tracker.port("estimated_position"), "estimate", ESTIMATE_RGBA,
+                      camera_pose=true_camera.get_output_port())
         for name, pose, rgba in (("true_camera", true_camera.get_output_port(),
                                   TRUE_CAMERA_RGBA),
                                  ("estimated_camera", tracker.port("X_WC"), ESTIMATE_RGBA)):
@@ -152,7 +155,7 @@ def demo_hook(meshcat, params: TrackerParams) -> Callable:
         points.set_default_rgba(POINTS_RGBA)
         points.set_point_size(0.006)
         builder.Connect(cloud.get_output_port(), points.cloud_input_port())
-        builder.Connect(tracker.port("X_WC"), points.pose_input_port())
+        builder.Connect(true_camera.get_output_port(), points.pose_input_port())
         frame_the_robot(meshcat, world.plant, world.end_effector_frame.model_instance(),
                         world.reference.positions(0.0))
         meshcat.StartRecording(frames_per_second=30.0)
@@ -172,10 +175,12 @@ def legend_entries() -> list:
     )
 
     return [LegendEntry(None, "<b>truth</b>: the robot in its own colours"),
-            LegendEntry(ENCODERS_RGBA, "<b>encoders only</b>: where the raw readings put it"),
-            LegendEntry(ESTIMATE_RGBA, "<b>estimate</b>: the tracker (and its camera pose)"),
-            LegendEntry(TRUE_CAMERA_RGBA, "true camera frustum"),
-            LegendEntry(POINTS_RGBA, "depth points, placed with the estimated camera")]
+            LegendEntry(ENCODERS_RGBA, "<b>encoders only</b>: the raw readings"),
+            LegendEntry(ESTIMATE_RGBA, "<b>estimate</b>: the tracker; green frustum: its "
+                                       "camera pose"),
+            LegendEntry(TRUE_CAMERA_RGBA, "the real camera; both ghosts hang from it, so "
+                                          "their hand is the hand pose in the camera frame"),
+            LegendEntry(POINTS_RGBA, "the camera's depth points")]
 
 
 def write_diagram(graphviz: str, out: Path) -> Path | None:

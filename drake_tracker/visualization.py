@@ -1,6 +1,8 @@
 """Meshcat views of the demo: the true robot in its own colours, the encoders-only robot
-(translucent blue) and the estimate (translucent green) in the same scene, the camera's
-frustum at its true and at its estimated pose, a legend, and a view that frames the robot.
+(translucent blue) and the estimate (translucent green) in the same scene, each ghost
+placed so that its camera is the real camera (its hand shows the hand pose in the camera
+frame, what the errors measure), the camera's frustum at its true and at its estimated
+pose, a legend, and a view that frames the robot.
 
 Each ghost robot is its own MultibodyPlant and SceneGraph in the Diagram (not simulated:
 ``MultibodyPositionToGeometryPose`` places its geometry), drawn by its own
@@ -68,17 +70,24 @@ def recolor_illustration(plant: MultibodyPlant, scene_graph: SceneGraph, rgba: R
 
 def AddGhostRobot(builder: DiagramBuilder, config: RobotConfig, meshcat: Meshcat,
                   positions: OutputPort, name: str, rgba: Rgba,
-                  with_camera_joints: bool = True) -> MeshcatVisualizer:
+                  with_camera_joints: bool = True,
+                  camera_pose: OutputPort | None = None) -> MeshcatVisualizer:
     """Draws the robot of ``config`` at ``positions`` (its joints in position order; with
     ``with_camera_joints`` the tracker model's six virtual joints come along) in
     ``meshcat`` under ``/drake/<name>``, in colour ``rgba``. Bodies welded to the world
-    are left out: they coincide with the true robot's and would only tint it."""
+    are left out: they coincide with the true robot's and would only tint it.
+
+    With ``camera_pose`` (AbstractValue[RigidTransform] X_WC of the true camera) the
+    whole ghost is moved so that its own camera frame sits there: its hand then shows
+    the hand pose in the camera frame that ``positions`` imply (what the demo's errors
+    measure), seen from the real camera."""
     scene_graph = builder.AddNamedSystem(f"{name}_scene_graph", SceneGraph())
     plant = MultibodyPlant(time_step=0.0)
     plant.RegisterAsSourceForSceneGraph(scene_graph)
     instance = add_robot(plant, config)
+    camera_frame = plant.GetFrameByName(config.camera_frame, instance)
     if with_camera_joints:
-        add_virtual_camera_joints(plant, plant.GetFrameByName(config.camera_frame, instance))
+        _, camera_frame = add_virtual_camera_joints(plant, camera_frame)
     plant.Finalize()
     recolor_illustration(plant, scene_graph, rgba, hide_anchored=True)
     to_pose = builder.AddNamedSystem(f"{name}_to_pose",
@@ -87,7 +96,39 @@ def AddGhostRobot(builder: DiagramBuilder, config: RobotConfig, meshcat: Meshcat
     builder.Connect(to_pose.get_output_port(),
                     scene_graph.get_source_pose_port(plant.get_source_id()))
     params = MeshcatVisualizerParams(role=Role.kIllustration, prefix=name)
-    return MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
+    visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
+    if camera_pose is not None:
+        align = builder.AddNamedSystem(
+            f"{name}_camera_alignment",
+            AlignGhostToCamera(meshcat, f"/drake/{name}", plant, camera_frame))
+        builder.Connect(positions, align.GetInputPort("positions"))
+        builder.Connect(camera_pose, align.GetInputPort("X_WC"))
+    return visualizer
+
+
+class AlignGhostToCamera(LeafSystem):
+    """Moves the Meshcat path of a ghost robot (drawn in its own plant's world G) so that
+    the ghost's camera frame C lands on the pose X_WC on its input: X_WG = X_WC X_GC⁻¹,
+    every ``publish_period_s``, into the recording too."""
+
+    def __init__(self, meshcat: Meshcat, path: str, plant: MultibodyPlant, camera_frame: Frame,
+                 publish_period_s: float = 1.0 / 30.0):
+        super().__init__()
+        self._meshcat, self._path = meshcat, path
+        self._plant, self._camera_frame = plant, camera_frame
+        self._plant_context = plant.CreateDefaultContext()
+        self.DeclareVectorInputPort("positions", plant.num_positions())
+        self.DeclareAbstractInputPort("X_WC", AbstractValue.Make(RigidTransform()))
+        self.DeclarePeriodicPublishEvent(publish_period_s, 0.0, self._publish)
+
+    def _publish(self, context) -> None:
+        positions = self.GetInputPort("positions").Eval(context)
+        if not np.all(np.isfinite(positions)):
+            return  # nothing to place yet (no reading); the ghost keeps its last pose
+        self._plant.SetPositions(self._plant_context, positions)
+        X_GC = self._camera_frame.CalcPoseInWorld(self._plant_context)
+        X_WC = self.GetInputPort("X_WC").Eval(context)
+        self._meshcat.SetTransform(self._path, X_WC @ X_GC.inverse(), context.get_time())
 
 
 def frustum_segments(camera: CameraIntrinsics, depth_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -138,7 +179,7 @@ class CameraFrustumVisualizer(LeafSystem):
 
 
 def frame_the_robot(meshcat: Meshcat, plant: MultibodyPlant, instance: ModelInstanceIndex,
-                    positions: np.ndarray, view_direction: np.ndarray = (0.9, -1.0, 0.55),
+                    positions: np.ndarray, view_direction: np.ndarray = (-0.5, 0.6, 0.9),
                     distance_per_radius: float = 2.2) -> None:
     """Points Meshcat's camera at the centre of the bodies of model ``instance`` of
     ``plant`` at ``positions``, from ``view_direction`` (world frame), far enough to see
