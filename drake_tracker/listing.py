@@ -23,6 +23,11 @@ def describe_motion(scenario: Scenario) -> str:
     if scenario.occluder.enabled:
         text += (f"; a box occludes the arm {scenario.occluder.start_s:g}-"
                  f"{scenario.occluder.end_s:g} s")
+    for occluder in scenario.occluders:
+        until = f"-{occluder.leave_s:g} s" if occluder.leave_s < 1e300 else " s to the end"
+        text += f"; a {occluder.shape} occludes {occluder.enter_s:g}{until}"
+    if scenario.model_mismatch.enabled:
+        text += "; the world robot is not the model"
     return text
 
 
@@ -35,6 +40,8 @@ def describe_bias(scenario: Scenario) -> str:
         return f"{e.constant_bias_deg:g}° constant bias"
     if e.bias == "steps":
         return f"±{e.step_amplitude_deg:g}° bias steps every {e.step_period_s:g} s"
+    if e.bias == "ramp":
+        return f"bias ramp 0 to {e.constant_bias_deg:g}° over {e.ramp_duration_s:g} s"
     return f"random-walk bias {e.random_walk_sigma_deg_per_sqrt_s:g}°/√s"
 
 

@@ -41,9 +41,9 @@ def scenario_events(scenario: Scenario, t_end: float) -> dict[str, list]:
     if encoders.bias == "steps" and encoders.step_period_s > 0:
         count = int(np.floor(t_end / encoders.step_period_s + 1e-9))
         events["bias_steps"] = [k * encoders.step_period_s for k in range(1, count + 1)]
-    occluder = scenario.occluder
-    if occluder.enabled and occluder.start_s < t_end:
-        events["occluded"].append((occluder.start_s, min(occluder.end_s, t_end)))
+    from drake_tracker.sim.config import occlusion_windows
+
+    events["occluded"] = occlusion_windows(scenario, t_end)
     t = scenario.trajectory
     if t.kind == "in-out-in" and t.excursion_start_s < t_end:
         back = t.excursion_start_s + 2 * t.excursion_ramp_s + t.excursion_duration_s
