@@ -53,7 +53,8 @@ def scenario_name(text: str) -> str:
 
     A bare sequence name stands for ``SEQUENCE/constant`` (``DEFAULT_BIAS_VARIANT``).
     """
-    from drake_tracker.sim.scenario import BIAS_VARIANTS, SEQUENCES, list_presets
+    from drake_tracker.sim.scenario import ALL_SEQUENCES as SEQUENCES
+    from drake_tracker.sim.scenario import BIAS_VARIANTS, list_presets
 
     if _is_file_name(text) or text in list_presets():
         return text

@@ -10,7 +10,7 @@ import pytest
 from drake_tracker.cli import main
 from drake_tracker.cli_args import UsageError, scenario_name
 from drake_tracker.params import TrackerParams, load_tracker_params
-from drake_tracker.sim.scenario import BIAS_VARIANTS, SEQUENCES, list_presets
+from drake_tracker.sim.scenario import ALL_SEQUENCES, BIAS_VARIANTS, list_presets
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -57,7 +57,7 @@ def test_an_unknown_bias_variant_lists_the_variants(tmp_path, capsys):
 
 
 def test_a_bare_sequence_name_means_its_constant_bias_variant():
-    for sequence in SEQUENCES:
+    for sequence in ALL_SEQUENCES:
         assert scenario_name(sequence) == f"{sequence}/constant"
     assert scenario_name("occlusion/none") == "occlusion/none"
     with pytest.raises(UsageError):
