@@ -205,7 +205,7 @@ def run_evaluate(args) -> int:
         if stop is None:
             raise
         done = sum(ResultStore(Path(args.out)).is_done(t) for t in tasks)
-        print(f"\nstopped ({stop or 'Ctrl-C'}): {done} of {len(tasks)} tasks have results in "
+        print(f"\nstopped ({str(stop) or 'Ctrl-C'}): {done} of {len(tasks)} tasks have results in "
               f"{args.out}; the same command resumes", flush=True)
         return 143 if isinstance(stop, TerminatedError) else 130
     finally:
