@@ -216,3 +216,8 @@ def test_the_command_rejects_unknown_names_and_bad_settling(tmp_path):
         main(["evaluate", "--quick", "--methods", "magic", "--out", out])
     with pytest.raises(SystemExit, match="--settle-s must be >= 0"):
         main(["evaluate", "--quick", "--settle-s", "-1", "--out", out])
+    with pytest.raises(SystemExit, match="--address is for --executor ray"):
+        main(["evaluate", "--quick", "--address", "auto", "--out", out])
+    with pytest.raises(SystemExit, match="--workers must be >= 1"):
+        main(["evaluate", "--quick", "--workers", "0", "--out", out])
+    assert not (tmp_path / "out").exists()  # nothing written before the checks pass

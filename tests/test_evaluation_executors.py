@@ -140,3 +140,13 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
     assert f"3 tasks, {finished} already done" in resumed.stdout
     assert len(list((out / "results").glob("*.csv"))) == 3
     assert (out / "boxplot_translation_mm.png").exists()
+
+
+def test_the_ray_executor_without_ray_says_how_to_install_it(tmp_path, monkeypatch):
+    from drake_tracker.cli import main
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray fails
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit, match=r"pip install 'drake_tracker\[cluster\]'"):
+        main(["evaluate", "--quick", "--executor", "ray", "--out", str(out)])
+    assert not out.exists()

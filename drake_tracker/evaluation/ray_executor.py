@@ -64,6 +64,7 @@ class RayExecutor(Executor):
         self.shares_files = address is None if shares_files is None else shares_files
         self._ray = None
         self._started_here = False
+        import_ray()  # fail here, with the install line, before any work starts
 
     def describe(self) -> str:
         ray = self._ray
