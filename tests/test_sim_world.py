@@ -320,3 +320,20 @@ def test_scenario_yaml_file_overrides_a_preset(tmp_path):
     path.write_text("preset: static/none\nencoders:\n  rate_hz: -1.0\n")
     with pytest.raises(ValueError, match="encoders.rate_hz"):
         load_scenario(path)
+
+
+def test_robot_config_is_read_from_scenario_yaml(tmp_path):
+    path = tmp_path / "arm6.yaml"
+    path.write_text(
+        "trajectory: {kind: static}\n"
+        "robot_config:\n"
+        "  model_file: arm6_on_stand.urdf\n"
+        "  end_effector_frame: tip\n"
+        "  added_frames: {tip: {parent: tool_center, xyz_m: [0, 0, 0.1]}}\n")
+    s = load_scenario(path)
+    config = s.resolved_robot_config()
+    assert (config.model_file, config.end_effector_frame) == ("arm6_on_stand.urdf", "tip")
+    assert config.added_frames["tip"].xyz_m == [0.0, 0.0, 0.1]
+    path.write_text("preset: static/none\nrobot_config: {end_effector_frame: nowhere}\n")
+    with pytest.raises(ValueError, match="Scenario.robot_config.*nowhere"):
+        load_scenario(path)
