@@ -238,7 +238,9 @@ def run_demo(args, scenario: Scenario | None = None, params: TrackerParams | Non
     out.mkdir(parents=True, exist_ok=True)
     meshcat = _start_meshcat()
     print(f"live view: {meshcat.web_url()} (open it now: it ends with the run; "
-          f"{out}/meshcat.html keeps the recording)", flush=True)
+          f"{out}/meshcat.html keeps the recording)\n"
+          "  truth: the robot's own colours; encoders only: translucent blue; estimate: "
+          "translucent green", flush=True)
     run = simulate_and_record(scenario, duration_s=getattr(args, "duration", None),
                               add_systems=demo_hook(meshcat, params), validate=False,
                               progress=progress)
