@@ -113,20 +113,19 @@ def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span):
         if c_hi > span[r, 1]:
             span[r, 1] = c_hi
         ei = bi * fr + ki
-        row = zbuf[r]
         if check_range:
             for c in range(c_lo, c_hi + 1):
                 iz = ai * float(c) + ei
                 if iz > iz_hi or iz < iz_lo or iz <= 0.0:
                     continue
                 z = np.float32(1.0 / iz)
-                if z < row[c]:
-                    row[c] = z
+                if z < zbuf[r, c]:
+                    zbuf[r, c] = z
         else:
             for c in range(c_lo, c_hi + 1):
                 z = np.float32(1.0 / (ai * float(c) + ei))
-                if z < row[c]:
-                    row[c] = z
+                if z < zbuf[r, c]:
+                    zbuf[r, c] = z
 
 
 @njit(cache=True, inline="always")
