@@ -32,9 +32,9 @@ from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import VAR_A, JointKalmanBank, initial_moments
+from drake_tracker.core.pipeline import camera_chain_joints
 from drake_tracker.params import TrackerParams, resolve_blocks, resolve_kalman_params
 from drake_tracker.robot import build_tracker_model, robot_preset
-from drake_tracker.tracker import camera_chain_joints
 
 
 def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,

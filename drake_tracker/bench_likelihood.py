@@ -27,13 +27,13 @@ import numpy as np
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import initial_moments
+from drake_tracker.core.pipeline import camera_chain_joints
 from drake_tracker.core.renderer import (
     default_view_configuration,
     make_renderer,
     random_configurations,
 )
 from drake_tracker.params import TrackerParams, resolve_blocks
-from drake_tracker.tracker import camera_chain_joints
 
 
 def _best_cpu_and_wall(fn, repeats: int) -> tuple[float, float]:

@@ -16,12 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.pipeline import PoseReadout, full_reading
 from drake_tracker.metrics import format_report_table, method_report
 from drake_tracker.params import TrackerParams, load_tracker_params
 from drake_tracker.progress import count_bar
 from drake_tracker.recording import RecordedRun
 from drake_tracker.robot import RobotConfig, build_tracker_model, load_robot_config
-from drake_tracker.tracker import PoseReadout, Tracker, full_reading
+from drake_tracker.tracker import Tracker
 
 
 @dataclass

@@ -13,9 +13,9 @@ import numpy as np
 from pydrake.common.yaml import yaml_dump
 
 from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.pipeline import PoseReadout, robot_joint_indices
 from drake_tracker.core.renderer import default_view_configuration, make_renderer
 from drake_tracker.recording import RecordedRun
-from drake_tracker.tracker import PoseReadout, robot_joint_indices
 
 
 def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0,
@@ -24,10 +24,12 @@ def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0
                   camera_offset: np.ndarray | None = None, amplitude_rad: float = 0.1,
                   period_s: float = 4.0, depth_noise_m: float = 0.002,
                   background_m: float = 2.5, renderer: str = "batched",
-                  biased_joints: list[str] | None = None, seed: int = 0) -> RecordedRun:
+                  biased_joints: list[str] | None = None, seed: int = 0,
+                  bias_step_rad: float = 0.0, bias_step_time_s: float = np.inf) -> RecordedRun:
     """A RecordedRun of the robot moving sinusoidally around its default view pose.
 
-    Every robot joint (or those in ``biased_joints``) gets ``bias_rad`` of encoder bias;
+    Every robot joint (or those in ``biased_joints``) gets ``bias_rad`` of encoder bias,
+    which steps by ``bias_step_rad`` at ``bias_step_time_s``;
     ``camera_offset`` (6) is the true camera pose relative to the nominal one (default:
     1 cm, 1 deg on each axis).
     """
@@ -49,7 +51,10 @@ def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0
     q_read = truth(reading_times)[:, robot]
     names = list(model.robot_joint_names)
     biased = np.array([n in (biased_joints or names) for n in names], float)
-    readings = q_read + bias_rad * biased + rng.normal(0.0, 1e-4, q_read.shape)
+    def bias(t: np.ndarray) -> np.ndarray:
+        return (bias_rad + bias_step_rad * (t >= bias_step_time_s))[:, None] * biased
+
+    readings = q_read + bias(reading_times) + rng.normal(0.0, 1e-4, q_read.shape)
     capture = np.arange(0.0, duration_s - delay_s, 1.0 / image_rate_hz)
     images = make_renderer(model, camera, renderer).render(truth(capture))
     images = np.where(np.isfinite(images), images, background_m)
@@ -70,7 +75,7 @@ def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0
         camera_intrinsics=camera,
         truth_times_s=truth_times,
         truth_positions_rad=q_truth[:, robot],
-        truth_bias_rad=np.tile(bias_rad * biased, (len(truth_times), 1)),
+        truth_bias_rad=bias(truth_times),
         truth_camera_offset=np.tile(offset, (len(truth_times), 1)),
         truth_X_CE=X_CE,
     )

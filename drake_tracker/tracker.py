@@ -2,265 +2,41 @@
 
 :class:`Tracker` is the whole method as plain Python over numpy: a Kalman bank on
 (angle, bias) for every joint of the tracker's model (the robot's joints and the six
-virtual camera joints, whose "reading" is always 0, SPEC §4), a delay buffer, and the
+virtual camera joints, whose "reading" is always 0), a delay buffer, and the
 CPF image update. Readings and images may come in any interleaving: an image stamped
 ``t'`` (its capture stamp minus ``image_time_offset_s``) is applied to the belief at
 ``t'`` and the readings after it are filtered again.
 
-The Drake systems in ``drake_tracker.systems`` call the same pieces, and give the same
-estimates from the same data (``tests/test_systems_equivalence.py``).
+The Drake systems in ``drake_tracker.systems`` call the same pieces
+(``drake_tracker.core.pipeline``), and give the same estimates from the same data
+(``tests/test_systems.py``).
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
+from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
 from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.health import (
-    ImageConsistency,
-    TrackerHealth,
-    image_consistency,
-    next_health,
+from drake_tracker.core.health import TrackerHealth, next_health
+from drake_tracker.core.pipeline import (
+    ImageProcessor,
+    PoseReadout,
+    TrackerEstimate,
+    estimate_from_belief,
+    full_reading,
+    new_belief_buffer,
+    robot_joint_indices,
 )
-from drake_tracker.core.image_update import CpfImageUpdate
-from drake_tracker.core.kalman import (
-    MEAN_A,
-    MEAN_B,
-    VAR_A,
-    VAR_B,
-    JointKalmanBank,
-    initial_moments,
-)
-from drake_tracker.core.kinematics import BatchedKinematics
-from drake_tracker.core.likelihood import PreparedObservation
-from drake_tracker.params import (
-    TrackerParams,
-    joint_noise_for,
-    resolve_blocks,
-    resolve_kalman_params,
-    validate_tracker_params,
-)
+from drake_tracker.params import TrackerParams, validate_tracker_params
 
 log = logging.getLogger(__name__)
 
-#: A bias jump is looked for over at most this much time since the previous image (s).
-MAX_JUMP_WINDOW_S = 1.0
-
-
-@dataclass
-class TrackerEstimate:
-    """The tracker's belief at ``time_s``; angles in rad (m for prismatic joints)."""
-
-    time_s: float
-    joint_names: list[str]
-    positions: np.ndarray
-    position_variances: np.ndarray
-    biases: np.ndarray
-    bias_variances: np.ndarray
-    #: [x, y, z (m), rx, ry, rz (rad)]: the estimated camera relative to the nominal one.
-    camera_offset: np.ndarray
-    #: The hand (end-effector frame) in the estimated camera frame.
-    X_CE: np.ndarray
-    #: The hand in the robot model's world frame.
-    X_WE: np.ndarray
-    #: Whether the images agree with the estimate (``core/health.py``): a controller
-    #: should fall back to the encoders when ``health.state`` is ``HealthState.LOST``.
-    health: TrackerHealth = TrackerHealth()
-
-
-def image_rng(seed: int, sequence: int) -> np.random.Generator:
-    """The CPF's random stream for image ``sequence``: independent of what came before,
-    so a re-simulated or replayed run draws the same numbers."""
-    return np.random.default_rng([int(seed), int(sequence), 0x5EED])
-
-
-class PoseReadout:
-    """X_CE and X_WE of joint positions, from the model's batched kinematics."""
-
-    def __init__(self, model):
-        self.model = model
-        self.kinematics = BatchedKinematics.from_plant(model.plant)
-
-    def poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(X_CE, X_WE, X_WC), each (N, 4, 4), for configurations q (N, n) or (n,)."""
-        q = np.atleast_2d(q)
-        X_WC = self.kinematics.frame_poses(q, self.model.camera_frame)
-        X_WE = self.kinematics.frame_poses(q, self.model.end_effector_frame)
-        X_CE = np.linalg.inv(X_WC) @ X_WE
-        return X_CE, X_WE, X_WC
-
-
-@dataclass(frozen=True)
-class ImageOutcome:
-    """What one image update produced (all None for an image with no valid pixel)."""
-
-    observation: AngleObservation | None
-    result: CPFResult | None
-    consistency: ImageConsistency | None
-
-
-class ImageProcessor:
-    """Turns a depth frame and the prior at its time into a pseudo-observation.
-
-    Shared by the offline tracker and the Drake CPF system, so that both draw the same
-    random numbers and skip the same images.
-    """
-
-    def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams):
-        self.params = params
-        im = params.image
-        chain = camera_chain_joints(model)
-        blocks = resolve_blocks(params, model.joint_names, chain)
-        noise = joint_noise_for(params, model.joint_names)
-        biased = np.array([j.has_bias for j in noise])
-        if not im.bias_jumps_in_camera_chain:
-            biased &= np.array([name not in chain for name in model.joint_names])
-        self._jump_rate = np.where(biased, [j.bias_jump_rate_per_s for j in noise], 0.0)
-        self._jump_std = np.array([j.bias_jump_std_rad for j in noise])
-        self.update = CpfImageUpdate(
-            model, camera, blocks, im.num_particles,
-            im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
-            tuple(im.annealing_betas))
-
-    def image_time(self, frame: DepthFrame) -> float:
-        return image_time(frame, self.params)
-
-    def wants(self, frame: DepthFrame, next_due_s: float) -> bool:
-        """Whether ``frame`` is due: its time is at or after ``next_due_s`` (see
-        ``next_due``); the others are skipped, so a fast camera builds up no backlog."""
-        if frame.is_empty or not self.params.image.enabled:
-            return False
-        return self.image_time(frame) >= next_due_s - 1e-9
-
-    def next_due(self, image_time_s: float, previous_due_s: float) -> float:
-        """The earliest image time processed after an image at ``image_time_s``.
-
-        Images are paced at ``min_image_interval_s`` on average (the first frame at or
-        after each due time: a 30 Hz camera with jitter gives 10 images/s at 0.1 s, not
-        the 7.5/s that a minimum gap would), and never closer than half of it, so a burst
-        of frames after a stall is not all processed.
-        """
-        interval = self.params.image.min_image_interval_s
-        base = previous_due_s if np.isfinite(previous_due_s) else image_time_s
-        return max(base + interval, image_time_s + 0.5 * interval)
-
-    def jump_probability(self, elapsed_s: float) -> np.ndarray:
-        """(n,) probability that each joint's bias jumped within ``elapsed_s`` (the time
-        since the previous applied image; at most ``MAX_JUMP_WINDOW_S``)."""
-        window = min(max(float(elapsed_s), 0.0), MAX_JUMP_WINDOW_S)
-        return -np.expm1(-self._jump_rate * window)
-
-    def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf
-                ) -> ImageOutcome:
-        """The image's observation relative to ``prior`` (None if it has no valid pixel),
-        and its consistency with the estimate; ``elapsed_s`` is the time since the
-        previous applied image."""
-        observation = self.update.prepare(frame.depth_m)
-        result = self.update(prior, observation,
-                             image_rng(self.params.image.seed, frame.sequence),
-                             self.jump_probability(elapsed_s), self._jump_std)
-        if result is None:
-            return ImageOutcome(None, None, None)
-        # A degenerate particle set would claim certainty; floor the posterior variance
-        # at the Monte-Carlo resolution of the prior.
-        floor = np.maximum(prior[VAR_A] / self.update.num_particles, 1e-14)
-        variance = np.maximum(result.variance, floor)
-        return ImageOutcome(AngleObservation.from_posterior(prior, result.mean, variance),
-                            result, self.consistency(self.image_time(frame), result.mean,
-                                                     observation))
-
-    def consistency(self, time_s: float, q: np.ndarray, observation: PreparedObservation
-                    ) -> ImageConsistency:
-        """How the image (prepared) agrees with the robot rendered at configuration q."""
-        intrinsics = self.update.intrinsics
-        observed = np.full(intrinsics.height * intrinsics.width, np.nan)
-        observed[observation.pixel_index] = observation.z
-        rendered = self.update.renderer.render(np.atleast_2d(q))[0]
-        return image_consistency(time_s, rendered,
-                                 observed.reshape(intrinsics.height, intrinsics.width),
-                                 self.params.image.likelihood)
-
-
-def make_bank_and_prior(model, params: TrackerParams, first_reading: np.ndarray | None
-                        ) -> tuple[JointKalmanBank, np.ndarray]:
-    """The Kalman bank for ``model`` and the initial (5, n) belief: angles at the first
-    reading of the robot joints (or ``initial_positions_rad``), virtual joints at 0."""
-    validate_tracker_params(params)
-    names = model.joint_names
-    bank = JointKalmanBank(resolve_kalman_params(params, names))
-    noise = joint_noise_for(params, names)
-    mean = np.zeros(len(names))
-    unknown = sorted(set(params.initial_positions_rad) - set(names))
-    if unknown:
-        raise ValueError(f"initial_positions_rad: unknown joint names {unknown}")
-    for name, value in params.initial_positions_rad.items():
-        mean[names.index(name)] = value
-    if first_reading is not None:
-        robot = robot_joint_indices(model)
-        mean[robot] = first_reading
-    prior = initial_moments(mean, np.array([j.initial_angle_std_rad for j in noise]),
-                            np.array([j.initial_bias_std_rad for j in noise]),
-                            bank.params.has_bias)
-    return bank, prior
-
-
-def camera_chain_joints(model) -> list[str]:
-    """The robot joints that move the camera (e.g. a pan-tilt head), base first."""
-    plant = model.plant
-    camera_body = model.nominal_camera_frame.body().index()
-    chain = []
-    for name in model.robot_joint_names:
-        joint = plant.GetJointByName(name)
-        if camera_body in plant.GetBodiesKinematicallyAffectedBy([joint.index()]):
-            chain.append(name)
-    return chain
-
-
-def image_time(frame: DepthFrame, params: TrackerParams) -> float:
-    """The time t' an image is applied at: its capture stamp minus the configured offset."""
-    return float(frame.capture_time_s) - params.image.image_time_offset_s
-
-
-def new_belief_buffer(model, params: TrackerParams, t: float,
-                      first_reading: np.ndarray | None) -> BeliefBuffer:
-    """The delay buffer started at ``t`` from the first reading (None: vision only)."""
-    bank, prior = make_bank_and_prior(model, params, first_reading)
-    return BeliefBuffer(bank, prior, t, params.buffer_horizon_s,
-                        params.max_interpolation_gap_s)
-
-
-def robot_joint_indices(model) -> np.ndarray:
-    """Indices of the robot (measured) joints within ``model.joint_names``."""
-    return np.array([model.joint_names.index(n) for n in model.robot_joint_names], int)
-
-
-def full_reading(model, robot_reading: np.ndarray) -> np.ndarray:
-    """The bank's reading vector: the robot joints' readings, 0 for the virtual joints."""
-    q = np.zeros(model.num_joints)
-    q[robot_joint_indices(model)] = robot_reading
-    return q
-
-
-def estimate_from_belief(model, readout: PoseReadout, time_s: float,
-                         belief: np.ndarray) -> TrackerEstimate:
-    X_CE, X_WE, _ = readout.poses(belief[MEAN_A])
-    return TrackerEstimate(
-        time_s=float(time_s),
-        joint_names=list(model.joint_names),
-        positions=belief[MEAN_A].copy(),
-        position_variances=belief[VAR_A].copy(),
-        biases=belief[MEAN_B].copy(),
-        bias_variances=belief[VAR_B].copy(),
-        camera_offset=belief[MEAN_A, model.virtual_joint_indices].copy(),
-        X_CE=X_CE[0],
-        X_WE=X_WE[0],
-    )
+__all__ = ["Tracker", "TrackerEstimate"]
 
 
 class Tracker:

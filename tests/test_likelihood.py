@@ -14,6 +14,7 @@ PARAMS = LikelihoodParams(
     max_depth_m=6.0,
     occluder_rate_per_m=math.log(2.0),
     occlusion_probability=0.2,
+    occluder_depth="truncated",
 )
 
 
@@ -131,8 +132,36 @@ def test_fused_pixel_kernel_equals_scalar_formula():
     o = observation
     pixel_log_ratios(slots, d, len(z), o.z, o.inv_sigma, o.lam_sigma2, o.gauss_coeff,
                      o.occ_coeff, o.log_p_occ_inf, o.uniform, o.occluder_rate_per_m,
-                     o.occlusion_probability, _ERFC_COEFFS, terms, np.empty((4, len(z))))
+                     o.occlusion_probability, o.truncation, _ERFC_COEFFS, terms,
+                     np.empty((4, len(z))))
     expected = np.array([_scalar_log_ratio(a, b, PARAMS) for a, b in zip(z, d)])
     assert np.ptp(expected) > 5.0
     # Stated tolerance: 1e-12 of the term's size (erfc table ~1e-15 absolute, FMA rounding).
     np.testing.assert_allclose(terms, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_independent_occluder_depth_by_numerical_integration():
+    """The default occluder model: the occluder's depth is exponential whatever the robot
+    does, and it occludes when nearer: o * p_occ(z|d) has no 1/(1-e^{-λd}) normaliser, so
+    an occluded pixel's score does not change with how far behind the occluder the robot
+    is (the truncated form prefers the robot just behind it)."""
+    p = LikelihoodParams(**{**PARAMS.__dict__, "occluder_depth": "independent",
+                            "occlusion_probability": 1 - 1e-12})
+    z = 0.6
+    s = p.depth_noise_std_m + p.depth_noise_factor_per_m * z * z
+    lam = p.occluder_rate_per_m
+    observation = prepare_observation(np.full((1, 1), z), p)
+    scores = []
+    for d in (0.9, 1.5, 3.0):
+        y = np.linspace(0.0, d, 200001)
+        integrand = lam * np.exp(-lam * y) * np.exp(-0.5 * ((z - y) / s) ** 2) / (
+            s * math.sqrt(2 * math.pi))
+        expected = p.tail_weight / p.max_depth_m + (1 - p.tail_weight) * np.trapezoid(
+            integrand, y)
+        score = log_likelihoods(np.full((1, 1, 1), d), observation, p)[0]
+        assert score == pytest.approx(math.log(expected / _p_occ_inf(z, p)), abs=1e-6)
+        scores.append(score)
+    assert np.ptp(scores) < 1e-6
+    truncated = [log_likelihoods(np.full((1, 1, 1), d), prepare_observation(
+        np.full((1, 1), z), PARAMS), PARAMS)[0] for d in (0.9, 3.0)]
+    assert truncated[0] > truncated[1] + 0.1

@@ -10,6 +10,7 @@ from pydrake.systems.primitives import VectorLogSink
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.kalman import MEAN_A, JointKalmanBank
+from drake_tracker.core.pipeline import full_reading, make_bank_and_prior
 from drake_tracker.offline import replay_run
 from drake_tracker.params import TrackerParams, resolve_kalman_params
 from drake_tracker.robot import build_tracker_model, robot_preset
@@ -19,7 +20,6 @@ from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
 from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
 from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage
 from drake_tracker.systems.recorded_run_source import RecordedRunSource
-from drake_tracker.tracker import full_reading, make_bank_and_prior
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 

@@ -10,6 +10,7 @@ from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import initial_moments
+from drake_tracker.core.pipeline import camera_chain_joints
 from drake_tracker.core.renderer import default_view_configuration, make_renderer
 from drake_tracker.offline import encoders_only_X_CE, replay_run, run_report
 from drake_tracker.params import (
@@ -20,7 +21,7 @@ from drake_tracker.params import (
 )
 from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.synthetic import synthetic_run
-from drake_tracker.tracker import Tracker, camera_chain_joints
+from drake_tracker.tracker import Tracker
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 

@@ -1,27 +1,32 @@
 """The tracker's health: is each image consistent with the estimate, and is it tracking?
 
-After each image update the robot is rendered once at the estimate (the posterior mean at
-the image time) and compared, pixel by pixel, with the image:
+Before each image update the robot is rendered once at the belief's mean at the image's
+time (what the filter expects to see: a predictive check, the image-space analogue of a
+normalised innovation) and compared, pixel by pixel, with the image:
 
 * ``robot_pixels``: pixels where the estimate shows the robot and the image is valid;
 * ``agreement``: the fraction of those whose depth is within 3σ (pixel noise) of it;
 * ``see_through``: the fraction where the camera sees *behind* the estimated robot, by
   more than 3σ and ``SEE_THROUGH_MARGIN_M``. An occluder only ever makes the image
   nearer than the robot, so seeing through it means the robot is not where the
-  estimate puts it: the one disagreement that occlusion cannot explain.
+  estimate puts it: the one disagreement that occlusion cannot explain;
+* ``occluded``: the fraction where the image is nearer than the robot by more than 3σ
+  (something in front of it).
 
 :class:`HealthMonitor` turns the per-image figures into a state:
 
 * ``tracking``: the latest images agree with the estimate;
-* ``uncertain``: the latest image saw too little of the robot to say (out of view, or
-  hidden), or one image disagreed;
+* ``uncertain``: the latest image saw too little of the robot to say (fewer than
+  ``min_robot_pixels`` unoccluded robot pixels: out of view, or hidden), or one image
+  disagreed;
 * ``lost``: ``lost_after_images`` consecutive images disagreed (``see_through`` above
-  ``max_see_through``). A controller should fall back to the encoders.
+  ``max_see_through``): the images keep contradicting the belief, and the filter has not
+  re-acquired (one image that shows a bias step and is followed at once is one
+  disagreement). A controller should fall back to the encoders.
 
 The state returns to ``tracking`` after ``recovered_after_images`` consistent images.
 """
 
-from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
@@ -50,6 +55,12 @@ class ImageConsistency:
     robot_pixels: int
     agreement: float
     see_through: float
+    occluded: float = 0.0
+
+    @property
+    def visible_robot_pixels(self) -> float:
+        """Robot pixels that the image does not show hidden behind something."""
+        return self.robot_pixels * (1.0 - self.occluded)
 
 
 def image_consistency(time_s: float, rendered_m: np.ndarray, observed_m: np.ndarray,
@@ -64,12 +75,14 @@ def image_consistency(time_s: float, rendered_m: np.ndarray, observed_m: np.ndar
     robot = np.isfinite(rendered_m) & valid_pixels(observed_m, params)
     count = int(robot.sum())
     if count == 0:
-        return ImageConsistency(float(time_s), 0, 0.0, 0.0)
+        return ImageConsistency(float(time_s), 0, 0.0, 0.0, 0.0)
     z, d = observed_m[robot], rendered_m[robot]
     sigma = pixel_sigma(z, params)
     agree = np.abs(z - d) <= 3.0 * sigma
     behind = z > d + 3.0 * sigma + SEE_THROUGH_MARGIN_M
-    return ImageConsistency(float(time_s), count, float(agree.mean()), float(behind.mean()))
+    nearer = z < d - 3.0 * sigma
+    return ImageConsistency(float(time_s), count, float(agree.mean()), float(behind.mean()),
+                            float(nearer.mean()))
 
 
 @dataclass
@@ -80,8 +93,8 @@ class HealthParams:
     min_robot_pixels: int = 30
     #: An image disagrees when more than this fraction of the robot is seen through.
     max_see_through: float = 0.25
-    #: Consecutive disagreeing images before ``lost``.
-    lost_after_images: int = 4
+    #: Consecutive disagreeing images before ``lost`` (0.2 s at 10 images/s).
+    lost_after_images: int = 2
     #: Consecutive consistent images before ``tracking`` again.
     recovered_after_images: int = 2
 
@@ -112,7 +125,7 @@ def next_health(health: TrackerHealth, image: ImageConsistency,
                 params: HealthParams) -> TrackerHealth:
     """The health after one more image (a pure function, so the Drake system can keep
     its state in the Context)."""
-    if image.robot_pixels < params.min_robot_pixels:
+    if image.visible_robot_pixels < params.min_robot_pixels:
         state = HealthState.LOST if health.state == HealthState.LOST else HealthState.UNCERTAIN
         return TrackerHealth(state, image, health.disagreeing_in_a_row, 0)
     if image.see_through > params.max_see_through:

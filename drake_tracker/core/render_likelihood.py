@@ -65,7 +65,8 @@ _ERFC_TOP = _ERFC_HI - 1e-9
 
 @njit(cache=True, fastmath=SAFE_FASTMATH)
 def pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
-                     log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs, terms, work):
+                     log_p_occ_inf, uniform, lam, occlusion, truncation, erfc_coeffs, terms,
+                     work):
     """terms[i] = log(p(z_p | d_i) / p_occ(z_p | inf)) for p = slots[i], d_i = depths[i],
     i < count: every term computed, no branches, in passes over the arrays that LLVM
     vectorises (exp and log from :mod:`~drake_tracker.core.vector_math`). ``work``:
@@ -97,7 +98,7 @@ def pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff
     for i in range(count):
         p = slots[i]
         p_vis = uniform + gauss_coeff[p] * gauss[i]
-        p_occ = uniform + occluded[i] / (1.0 - decay[i])
+        p_occ = uniform + occluded[i] / (1.0 - truncation * decay[i])
         terms[i] = visible * p_vis + occlusion * p_occ
     log_inplace(terms, count, scratch)
     for i in range(count):
@@ -109,7 +110,7 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
                      sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
                      planes, fx, fy, cx, cy, near, far, chunks, height, width,
                      pixel_slot, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
-                     log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs, out):
+                     log_p_occ_inf, uniform, lam, occlusion, truncation, erfc_coeffs, out):
     """FK, rasterising and scoring of each configuration q[n] into out[n], in ``chunks``
     contiguous chunks of particles (prange: parallel in the parallel compilation)."""
     N = q.shape[0]
@@ -160,8 +161,8 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
                         depths[count] = d
                         count += 1
             pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff,
-                             occ_coeff, log_p_occ_inf, uniform, lam, occlusion, erfc_coeffs,
-                             terms, work)
+                             occ_coeff, log_p_occ_inf, uniform, lam, occlusion, truncation,
+                             erfc_coeffs, terms, work)
             total = 0.0
             for i in range(count):
                 total += terms[i]
@@ -204,7 +205,7 @@ def fused_scores(q: np.ndarray, frame_tables: tuple, render_tables: tuple,
     kernel(q, *frame_tables, *render_tables, frustum_planes, fx, fy, cx, cy, near_m, far_m,
            chunks if parallel else 1, height, width, o.pixel_slot, o.z, o.inv_sigma,
            o.lam_sigma2, o.gauss_coeff, o.occ_coeff, o.log_p_occ_inf, o.uniform,
-           o.occluder_rate_per_m, o.occlusion_probability, _ERFC_COEFFS, out)
+           o.occluder_rate_per_m, o.occlusion_probability, o.truncation, _ERFC_COEFFS, out)
     if policy is not None:
         policy.record(parallel, time.perf_counter() - t0, N)
     return out

@@ -45,9 +45,14 @@ class TrackerSystems:
     depth_adapter: DepthImageToFrame | None = None
 
     def port(self, name: str) -> OutputPort:
-        """An estimate output port (``ESTIMATE_PORTS``) of the Kalman bank."""
+        """An estimate output port (``ESTIMATE_PORTS``) of the Kalman bank, or ``health``
+        (``TrackerHealth`` after the latest image: fall back to the encoders while its
+        ``state`` is ``HealthState.LOST``)."""
+        if name == "health":
+            return self.image_update.GetOutputPort("health")
         if name not in ESTIMATE_PORTS:
-            raise ValueError(f"unknown tracker output '{name}'; known: {list(ESTIMATE_PORTS)}")
+            raise ValueError(f"unknown tracker output '{name}'; known: "
+                             f"{list(ESTIMATE_PORTS) + ['health']}")
         return self.kalman_bank.GetOutputPort(name)
 
 

@@ -12,9 +12,9 @@ from pydrake.systems.framework import LeafSystem
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import TrackerHealth, next_health
+from drake_tracker.core.pipeline import ImageProcessor
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
-from drake_tracker.tracker import ImageProcessor
 
 log = logging.getLogger(__name__)
 

@@ -12,14 +12,14 @@ from pydrake.systems.framework import LeafSystem
 
 from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.frames import DepthFrame
-from drake_tracker.params import TrackerParams
-from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
-from drake_tracker.tracker import (
+from drake_tracker.core.pipeline import (
     full_reading,
     image_time,
     make_bank_and_prior,
     new_belief_buffer,
 )
+from drake_tracker.params import TrackerParams
+from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
 
 log = logging.getLogger(__name__)
 

@@ -10,9 +10,9 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.pipeline import PoseReadout, full_reading, make_bank_and_prior
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
-from drake_tracker.tracker import PoseReadout, full_reading, make_bank_and_prior
 
 log = logging.getLogger(__name__)
 

@@ -1,0 +1,106 @@
+"""Tracker health: the per-image consistency figures, the state machine, and a bias step
+that the filter re-acquires (with bias jumps) or reports as lost (without)."""
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.health import (
+    HealthParams,
+    HealthState,
+    ImageConsistency,
+    TrackerHealth,
+    image_consistency,
+    next_health,
+)
+from drake_tracker.core.likelihood import LikelihoodParams
+from drake_tracker.metrics import pose_errors
+from drake_tracker.params import TrackerParams
+from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.synthetic import synthetic_run
+from drake_tracker.tracker import Tracker
+
+
+def test_image_consistency_counts_agreeing_and_see_through_pixels():
+    rendered = np.full((10, 10), np.inf)
+    rendered[:, :6] = 1.0  # the estimate shows the robot on 60 pixels
+    observed = np.full((10, 10), 3.0)
+    observed[:, :2] = 1.001  # 20 agree
+    observed[:, 2:4] = 0.6  # 20 occluded: nearer than the robot, not seen through
+    # observed[:, 4:6] = 3.0: 20 seen through (the robot is not there)
+    observed[0, 0] = np.nan  # invalid pixels do not count
+    c = image_consistency(1.5, rendered, observed, LikelihoodParams())
+    assert (c.time_s, c.robot_pixels) == (1.5, 59)
+    assert c.agreement == pytest.approx(19 / 59)
+    assert c.see_through == pytest.approx(20 / 59)
+    assert image_consistency(0.0, np.full((4, 4), np.inf), observed[:4, :4],
+                             LikelihoodParams()).robot_pixels == 0
+
+
+def test_health_states_follow_consecutive_images():
+    p = HealthParams(min_robot_pixels=10, max_see_through=0.25, lost_after_images=3,
+                     recovered_after_images=2)
+    good = ImageConsistency(0.0, 100, 0.9, 0.02)
+    bad = ImageConsistency(0.0, 100, 0.2, 0.6)
+    unseen = ImageConsistency(0.0, 3, 0.0, 0.0)
+    states = []
+    h = TrackerHealth()
+    for image in (good, good, bad, bad, bad, unseen, good, good, unseen, good):
+        h = next_health(h, image, p)
+        states.append(h.state.name[0])
+    # U: the first good image is not yet enough; L after 3 bad in a row; an unseen
+    # image keeps "lost" until 2 good ones in a row; then unseen -> uncertain.
+    assert states == ["U", "T", "U", "U", "L", "L", "L", "T", "U", "U"]
+
+
+def _track_step(apollo, run, params, step_s):
+    tracker = Tracker(apollo, run.camera_intrinsics, params)
+    images = np.argsort(run.image_arrival_times_s)
+    k_image, errors, lost_at = 0, [], None
+    for t, reading in zip(run.reading_times_s, run.readings_rad):
+        while k_image < len(images) and run.image_arrival_times_s[images[k_image]] <= t:
+            i = images[k_image]
+            tracker.add_image(DepthFrame(float(run.image_capture_times_s[i]),
+                                         float(run.image_arrival_times_s[i]),
+                                         run.depth_images_m[i], int(i)))
+            if lost_at is None and t > step_s and tracker.health.state == HealthState.LOST:
+                lost_at = t
+            k_image += 1
+        tracker.add_reading(float(t), reading)
+        j = np.searchsorted(run.truth_times_s, t)
+        if j < len(run.truth_times_s) and run.truth_times_s[j] == t:
+            estimate = tracker.estimate()
+            errors.append((t, pose_errors(estimate.X_CE[None], run.truth_X_CE[j][None])[0][0]))
+    return np.array(errors), lost_at
+
+
+@pytest.fixture(scope="module")
+def apollo():
+    return build_tracker_model(robot_preset("apollo"))
+
+
+@pytest.fixture(scope="module")
+def step_run(apollo):
+    arm = [n for n in apollo.robot_joint_names if n.startswith("arm")]
+    return synthetic_run(apollo, duration_s=4.0, encoder_rate_hz=250.0,
+                         bias_rad=np.radians(3.0), bias_step_rad=np.radians(-10.0),
+                         bias_step_time_s=1.5, biased_joints=arm, seed=1)
+
+
+def test_a_bias_step_is_reacquired_within_two_seconds(apollo, step_run):
+    """10 deg on every arm joint at once: with the Gaussian bias process alone the filter
+    follows it at the pace of σb (tens of mm for seconds); the bias-jump prior lets the
+    images that show the step move the estimate there."""
+    errors, lost_at = _track_step(apollo, step_run, TrackerParams(), step_s=1.5)
+    t, e = errors[:, 0], errors[:, 1]
+    assert lost_at is None  # one image disagreed, the next agreed again
+    assert np.median(e[(t > 1.0) & (t < 1.5)]) < 5.0  # converged before the step
+    assert e[(t > 1.5) & (t < 1.7)].max() > 30.0  # the step is real
+    assert e[t >= 3.5].max() < 10.0
+
+
+def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(apollo, step_run):
+    params = TrackerParams()
+    params.kalman.robot_joints.bias_jump_rate_per_s = 0.0
+    errors, lost_at = _track_step(apollo, step_run, params, step_s=1.5)
+    assert lost_at is not None and lost_at <= 2.5, lost_at
