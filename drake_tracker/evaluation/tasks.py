@@ -27,6 +27,10 @@ from drake_tracker.metrics import pose_errors
 #: The quick suite: each kind of sequence (sinusoid, free, fast, out of view, occlusion)
 #: with each bias variant, shortened.
 QUICK_SEQUENCES = ("s-full-arm", "s-head-arm", "arm++", "in-out-in", "occlusion")
+#: Further quick cases (sequence, bias): heavy and lasting occlusion, a bias ramp, and a
+#: world robot that is not exactly the tracker's model.
+QUICK_EXTRA_CASES = (("occlusion-heavy", "constant"), ("occlusion-lasting", "constant"),
+                     ("s-full-arm", "ramp"), ("s-full-arm-mismatch", "constant"))
 QUICK_DURATION_S = 10.0
 QUICK_IMAGE_INTERVAL_S = 0.1
 #: Seeds per case by default (each seed varies the simulation and the tracker).
@@ -77,20 +81,12 @@ class Task:
         """The preset with this task's seed; a shortened run keeps its events in it (the
         hand leaves the view, the occluder passes) by compressing their timing."""
         from drake_tracker.sim.scenario import load_scenario
+        from drake_tracker.sim.timing import shorten_scenario
 
         scenario = load_scenario(f"{self.sequence}/{self.bias}")
         scenario.seed = self.seed
-        if self.duration_s is not None and self.duration_s < scenario.duration_s:
-            d = self.duration_s
-            t = scenario.trajectory
-            t.excursion_start_s, t.excursion_ramp_s = 0.2 * d, 0.1 * d
-            t.excursion_duration_s = 0.4 * d
-            o = scenario.occluder
-            o.start_s, o.end_s = 0.25 * d, 0.85 * d
-            e = scenario.encoders
-            e.step_period_s = min(e.step_period_s, 0.3 * d)
-            e.step_transition_s = min(e.step_transition_s, 0.5 * e.step_period_s)
-            scenario.duration_s = d
+        if self.duration_s is not None:
+            shorten_scenario(scenario, self.duration_s)
         return scenario
 
 
@@ -107,8 +103,11 @@ def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...],
         sequences, duration, num_seeds = SEQUENCES, None, seeds or FULL_SEEDS
     if duration_s is not None:
         duration = duration_s
+    cases = [(seq, bias) for seq in sequences for bias in BIASES]
+    if quick:
+        cases += list(QUICK_EXTRA_CASES)
     return [Task(seq, bias, seed, duration, QUICK_IMAGE_INTERVAL_S, methods, params_yaml)
-            for seq in sequences for bias in BIASES for seed in range(num_seeds)]
+            for seq, bias in cases for seed in range(num_seeds)]
 
 
 def task_base_params(task: Task):
