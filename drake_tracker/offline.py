@@ -37,6 +37,8 @@ class ReplayResult:
     X_CE: np.ndarray  # (T, 4, 4)
     joint_names: list[str]
     num_images_applied: int
+    #: Frames not processed (not due at ``min_image_interval_s``, or unusable).
+    num_images_skipped: int
     image_update_s: list[float]
     wall_time_s: float
 
@@ -100,6 +102,7 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None
         times_s=np.asarray(times), positions=out_q, position_variances=out_var, biases=out_b,
         camera_offsets=out_q[:, virtual], X_CE=out_X, joint_names=list(model.joint_names),
         num_images_applied=tracker.num_images_applied,
+        num_images_skipped=tracker.num_images_skipped,
         image_update_s=list(tracker.images.update.times.per_update) if tracker.images else [],
         wall_time_s=time.perf_counter() - t_start,
     )
@@ -148,11 +151,12 @@ def run_track(args, run: RecordedRun | None = None, params: TrackerParams | None
                               "full_fusion": result.X_CE})
     updates = np.array(result.image_update_s)
     report["images_applied"] = result.num_images_applied
+    report["images_skipped"] = result.num_images_skipped
     report["replay_wall_time_s"] = result.wall_time_s
     report["image_update_ms_median"] = float(1e3 * np.median(updates)) if len(updates) else None
     print(format_report_table(report))
     print(f"replayed {run.duration_s:.1f} s of data in {result.wall_time_s:.1f} s; "
-          f"{result.num_images_applied} images applied")
+          f"{result.num_images_applied} images applied, {result.num_images_skipped} skipped")
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
