@@ -3,6 +3,7 @@ the local process pool and a local Ray instance, and stopping with SIGTERM."""
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -127,7 +128,7 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
         if process.poll() is None:
             process.kill()
     finished = len(list((out / "results").glob("*.csv")))
-    if finished < 3:  # stopped while tasks were running
+    if process.returncode != 0:  # stopped while tasks were running
         assert process.returncode == 143, output
         assert "the same command resumes" in output
     deadline = time.monotonic() + 15
@@ -137,8 +138,9 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
     assert not list((out / "results").glob("*.tmp"))  # no half-written result
     resumed = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
-    assert f"3 tasks, {finished} already done" in resumed.stdout
-    assert len(list((out / "results").glob("*.csv"))) == 3
+    counts = re.search(r"(\d+) tasks, (\d+) already done", resumed.stdout)
+    assert counts and int(counts[2]) == finished >= 1, resumed.stdout
+    assert len(list((out / "results").glob("*.csv"))) == int(counts[1])
     assert (out / "boxplot_translation_mm.png").exists()
 
 
