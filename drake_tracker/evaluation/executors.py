@@ -154,7 +154,11 @@ def _drain(progress_queue, on_progress) -> None:
 
 
 class ProcessExecutor(Executor):
-    """A local pool of ``workers`` processes (spawned, one numba thread each)."""
+    """A local pool of ``workers`` processes (spawned, one numba thread each).
+
+    Spawned workers import the calling script: a script that uses this executor keeps
+    its work under ``if __name__ == "__main__":`` (the command line does).
+    """
 
     name = "local"
 
