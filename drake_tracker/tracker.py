@@ -115,7 +115,8 @@ class Tracker:
             self.num_images_skipped += 1
             return False
         anchor = self.buffer.image_anchor(t)
-        outcome = self.images.observe(frame, anchor.prior, t - self.last_applied_image_s)
+        elapsed = t - self.last_applied_image_s if self.health.acquired else 0.0
+        outcome = self.images.observe(frame, anchor.prior, elapsed)
         self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
         self.last_result = outcome.result
         if outcome.observation is None:

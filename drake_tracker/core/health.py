@@ -119,6 +119,8 @@ class TrackerHealth:
     latest: ImageConsistency | None = None
     disagreeing_in_a_row: int = 0
     agreeing_in_a_row: int = 0
+    #: Whether the tracker has been ``tracking`` at least once (it has acquired the arm).
+    acquired: bool = False
 
 
 def next_health(health: TrackerHealth, image: ImageConsistency,
@@ -127,15 +129,16 @@ def next_health(health: TrackerHealth, image: ImageConsistency,
     its state in the Context)."""
     if image.visible_robot_pixels < params.min_robot_pixels:
         state = HealthState.LOST if health.state == HealthState.LOST else HealthState.UNCERTAIN
-        return TrackerHealth(state, image, health.disagreeing_in_a_row, 0)
+        return TrackerHealth(state, image, health.disagreeing_in_a_row, 0, health.acquired)
     if image.see_through > params.max_see_through:
         bad = health.disagreeing_in_a_row + 1
         state = HealthState.LOST if bad >= params.lost_after_images else \
             max(health.state, HealthState.UNCERTAIN)
-        return TrackerHealth(state, image, bad, 0)
+        return TrackerHealth(state, image, bad, 0, health.acquired)
     good = health.agreeing_in_a_row + 1
     if health.state == HealthState.TRACKING or good >= params.recovered_after_images:
         state = HealthState.TRACKING
     else:
         state = health.state
-    return TrackerHealth(state, image, 0, good)
+    return TrackerHealth(state, image, 0, good,
+                         health.acquired or state == HealthState.TRACKING)

@@ -156,7 +156,11 @@ class ImageProcessor:
 
     def jump_probability(self, elapsed_s: float) -> np.ndarray:
         """(n,) probability that each joint's bias jumped within ``elapsed_s`` (the time
-        since the previous applied image; at most ``MAX_JUMP_WINDOW_S``)."""
+        since the previous applied image; at most ``MAX_JUMP_WINDOW_S``). Callers pass 0
+        until the tracker has acquired the arm (``TrackerHealth.acquired``): the start is
+        the initial prior's job, and a jump-wide prior there let the first images swing a
+        shoulder 35 deg to put the arm out of view (a robot rendered nowhere scores 0, a
+        misaligned one less), measured on s-head-arm/constant, 0.7 m from then on."""
         window = min(max(float(elapsed_s), 0.0), MAX_JUMP_WINDOW_S)
         return -np.expm1(-self._jump_rate * window)
 

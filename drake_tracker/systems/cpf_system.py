@@ -106,8 +106,8 @@ class CpfImageUpdateSystem(LeafSystem):
             return False
         s.next_image_due_s = self.processor.next_due(prior.image_time_s, s.next_image_due_s)
         try:
-            outcome = self.processor.observe(frame, prior.anchor.prior,
-                                             prior.image_time_s - s.last_applied_image_s)
+            elapsed = prior.image_time_s - s.last_applied_image_s if s.health.acquired else 0.0
+            outcome = self.processor.observe(frame, prior.anchor.prior, elapsed)
         except ValueError as err:
             log.warning("image %d skipped: %s", frame.sequence, err)
             return False
