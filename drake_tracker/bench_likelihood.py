@@ -29,23 +29,12 @@ from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import initial_moments
 from drake_tracker.core.pipeline import camera_chain_joints
 from drake_tracker.core.renderer import (
+    best_wall_and_cpu_time,
     default_view_configuration,
     make_renderer,
     random_configurations,
 )
 from drake_tracker.params import TrackerParams, resolve_blocks
-
-
-def _best_cpu_and_wall(fn, repeats: int) -> tuple[float, float]:
-    """(wall, cpu) seconds of ``fn()``, each the least of ``repeats`` runs."""
-    wall = cpu = np.inf
-    for _ in range(max(1, repeats)):
-        c0 = time.process_time()
-        t0 = time.perf_counter()
-        fn()
-        wall = min(wall, time.perf_counter() - t0)
-        cpu = min(cpu, time.process_time() - c0)
-    return float(wall), float(cpu)
 
 
 def _test_image(renderer, q: np.ndarray) -> np.ndarray:
@@ -168,7 +157,7 @@ def _stages(update: CpfImageUpdate, observation, view, repeats: int) -> dict:
 
     def cpu(fn, items):
         fn(items[0])
-        return _best_cpu_and_wall(each(fn, items), repeats)[1] * 1e6 / evaluations
+        return best_wall_and_cpu_time(each(fn, items), repeats)[1] * 1e6 / evaluations
 
     fk = cpu(lambda c: renderer.kinematics.relative_poses(c, frame), chunks)
     fk_raster = cpu(lambda c: renderer.score(c, nearly_empty), chunks)

@@ -92,7 +92,7 @@ def synthetic_observation(renderer, q_true: np.ndarray, seed: int = 0,
     return depth.astype(np.float32)
 
 
-def _best_time(fn, repeats: int) -> tuple[float, float]:
+def best_wall_and_cpu_time(fn, repeats: int) -> tuple[float, float]:
     """(wall, cpu) seconds of ``fn()``, each the least of ``repeats`` runs (the least
     disturbed by other processes on the machine); cpu is this process's CPU time summed
     over its threads."""
@@ -143,7 +143,7 @@ def benchmark_renderers(model, intrinsics: CameraIntrinsics, num_particles: int 
     batched.render(q[:2])  # compile / load the cached kernel
     drake.render(q[:1])  # create the render window
     images_b = batched.render(q)
-    t_batched, cpu_batched = _best_time(lambda: batched.render(q), repeats)
+    t_batched, cpu_batched = best_wall_and_cpu_time(lambda: batched.render(q), repeats)
     t0 = time.perf_counter()
     images_d = drake.render(q[:num_drake])
     t_drake = time.perf_counter() - t0
@@ -159,8 +159,9 @@ def benchmark_renderers(model, intrinsics: CameraIntrinsics, num_particles: int 
                                     spread_rad=tracking_spread_rad, center=center)
     batched.score(q_track[:2], observation)  # compile / load
     log_likelihoods(images_b[:2], observation, params)
-    t_fused, cpu_fused = _best_time(lambda: batched.score(q_track, observation), repeats)
-    t_separate, _ = _best_time(
+    t_fused, cpu_fused = best_wall_and_cpu_time(
+        lambda: batched.score(q_track, observation), repeats)
+    t_separate, _ = best_wall_and_cpu_time(
         lambda: log_likelihoods(batched.render(q_track), observation, params), repeats)
     return {
         "width": intrinsics.width,
