@@ -29,6 +29,7 @@ from drake_tracker.core.pipeline import (
     TrackerEstimate,
     estimate_from_belief,
     full_reading,
+    jump_window_s,
     new_belief_buffer,
     robot_joint_indices,
 )
@@ -115,8 +116,8 @@ class Tracker:
             self.num_images_skipped += 1
             return False
         anchor = self.buffer.image_anchor(t)
-        elapsed = t - self.last_applied_image_s if self.health.acquired else 0.0
-        outcome = self.images.observe(frame, anchor.prior, elapsed)
+        outcome = self.images.observe(
+            frame, anchor.prior, jump_window_s(t, self.last_applied_image_s, self.health))
         self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
         self.last_result = outcome.result
         if outcome.observation is None:

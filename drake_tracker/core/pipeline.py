@@ -201,6 +201,14 @@ class ImageProcessor:
 
 
 
+def jump_window_s(image_time_s: float, last_applied_image_s: float,
+                  health: TrackerHealth) -> float:
+    """The time a bias jump is looked for before an image (``ImageProcessor.observe``'s
+    ``elapsed_s``): since the previous applied image, or 0 until the tracker has acquired
+    the arm (see ``ImageProcessor.jump_probability``)."""
+    return image_time_s - last_applied_image_s if health.acquired else 0.0
+
+
 def make_bank_and_prior(model, params: TrackerParams, first_reading: np.ndarray | None
                         ) -> tuple[JointKalmanBank, np.ndarray]:
     """The Kalman bank for ``model`` and the initial (5, n) belief: angles at the first

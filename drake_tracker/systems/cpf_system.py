@@ -12,7 +12,7 @@ from pydrake.systems.framework import LeafSystem
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import TrackerHealth, next_health
-from drake_tracker.core.pipeline import ImageProcessor
+from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
 
@@ -106,8 +106,8 @@ class CpfImageUpdateSystem(LeafSystem):
             return False
         s.next_image_due_s = self.processor.next_due(prior.image_time_s, s.next_image_due_s)
         try:
-            elapsed = prior.image_time_s - s.last_applied_image_s if s.health.acquired else 0.0
-            outcome = self.processor.observe(frame, prior.anchor.prior, elapsed)
+            window = jump_window_s(prior.image_time_s, s.last_applied_image_s, s.health)
+            outcome = self.processor.observe(frame, prior.anchor.prior, window)
         except ValueError as err:
             log.warning("image %d skipped: %s", frame.sequence, err)
             return False
