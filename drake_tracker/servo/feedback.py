@@ -1,0 +1,83 @@
+"""The three pose feedbacks of the study, each an ``X_CE`` port for the controller.
+
+* ``encoders`` (a): forward kinematics of the raw encoder readings on the nominal robot,
+  in the NOMINAL camera frame (:class:`EncoderKinematicsPose`): what a robot without the
+  tracker knows;
+* ``tracker`` (b): drake_tracker's ``X_CE`` (the hand in the ESTIMATED camera frame),
+  added with ``AddTracker`` on the world's encoders and depth camera, in the same Diagram;
+* ``truth`` (c): the hand in the TRUE camera frame, the ideal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, OutputPort
+
+from drake_tracker.params import TrackerParams
+from drake_tracker.robot import RobotConfig, add_robot
+from drake_tracker.servo.config import FEEDBACKS
+from drake_tracker.servo.world import ServoWorld, camera_model
+from drake_tracker.sim.validation import require_one_of
+from drake_tracker.systems.add_tracker import AddTracker, TrackerSystems
+
+
+class EncoderKinematicsPose(LeafSystem):
+    """The hand in the nominal camera frame at the encoder readings (nominal robot).
+
+    .. pydrake_system::
+
+        name: EncoderKinematicsPose
+        input_ports:
+        - measured_position
+        output_ports:
+        - X_CE
+
+    ``measured_position`` (n): robot joints in ``robot_joint_names`` order (rad);
+    ``X_CE``: AbstractValue[RigidTransform].
+    """
+
+    def __init__(self, robot_config: RobotConfig, robot_joint_names: list[str]):
+        super().__init__()
+        self._plant = MultibodyPlant(time_step=0.0)
+        add_robot(self._plant, robot_config)
+        self._plant.Finalize()
+        self._context = self._plant.CreateDefaultContext()
+        self._rows = np.array([self._plant.GetJointByName(n).position_start()
+                               for n in robot_joint_names])
+        self._C = self._plant.GetFrameByName(robot_config.camera_frame)
+        self._E = self._plant.GetFrameByName(robot_config.end_effector_frame)
+        self.DeclareVectorInputPort("measured_position", len(robot_joint_names))
+        self.DeclareAbstractOutputPort("X_CE", lambda: AbstractValue.Make(RigidTransform()),
+                                       self._calc)
+
+    def _calc(self, context, output) -> None:
+        q = self._plant.GetPositions(self._context)
+        q[self._rows] = self.get_input_port(0).Eval(context)
+        self._plant.SetPositions(self._context, q)
+        output.set_value(self._plant.CalcRelativeTransform(self._context, self._C, self._E))
+
+
+def AddFeedback(builder: DiagramBuilder, world: ServoWorld, feedback: str,
+                params: TrackerParams | None = None
+                ) -> tuple[OutputPort, TrackerSystems | None]:
+    """The ``X_CE`` port of ``feedback`` (one of ``FEEDBACKS``), and the tracker's
+    systems when it is ``tracker`` (which needs the world's depth camera)."""
+    require_one_of(feedback, FEEDBACKS, "feedback")
+    if feedback == "truth":
+        return world.ports["true_X_CE"], None
+    if feedback == "encoders":
+        fk = builder.AddNamedSystem("encoders_X_CE", EncoderKinematicsPose(
+            world.robot_config, world.robot_joint_names))
+        builder.Connect(world.ports["measured_position"], fk.get_input_port(0))
+        return fk.GetOutputPort("X_CE"), None
+    if "depth_frame" not in world.ports:
+        raise ValueError("feedback 'tracker' needs the world's depth camera "
+                         "(AddServoWorld(..., with_camera=True))")
+    tracker = AddTracker(builder, world.model, camera_model(world.scenario),
+                         params or TrackerParams(), world.ports["measured_position"],
+                         world.ports["measurement_time"], world.ports["depth_frame"],
+                         world.encoder_period_s)
+    return tracker.port("X_CE"), tracker
