@@ -18,6 +18,7 @@ from drake_tracker.cli_args import (
     check_params_for_model,
     load_params_arg,
     load_run_arg,
+    load_servo_config_arg,
     positive_int,
     positive_seconds,
     resolve_scenario,
@@ -272,6 +273,54 @@ def _add_evaluate(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _add_servo(sub) -> None:
+    p = sub.add_parser(
+        "servo", help="closed-loop study: servo the hand to targets, with and without the "
+                      "tracker",
+        description="Simulates the robot (dynamic) servoing its hand to targets given in "
+                    "the camera frame three times, the same controller fed by (a) the "
+                    "encoders with the nominal camera, (b) drake_tracker's X_CE, (c) the "
+                    "truth; prints each target's final true error and settle time and the "
+                    "real-time factors, and writes report.json, servo_errors.png, "
+                    "errors.csv and meshcat.html to --out.",
+        epilog="examples:\n  drake-tracker servo --out out/servo\n"
+               "  drake-tracker servo --scenario static/time-varying --out out/servo_tv\n"
+               "  drake-tracker servo --print-config > servo.yaml")
+    p.add_argument("--config", default=None, metavar="YAML",
+                   help="study configuration (drake_tracker.servo.config.ServoStudyConfig; "
+                        "--print-config prints the defaults)")
+    p.add_argument("--scenario", default=None,
+                   help="the world's scenario, over the config's (default static/constant; "
+                        "static/time-varying: bias steps)")
+    p.add_argument("--out", default="out/servo", help="output folder (default: %(default)s)")
+    p.add_argument("--duration", type=positive_seconds, default=None, metavar="SECONDS",
+                   help="stop each run this early (default: hold + every dwell)")
+    p.add_argument("--runs", default=None,
+                   help="comma-separated subset of encoders,tracker,truth (default: all)")
+    p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
+    p.add_argument("--no-meshcat", action="store_true", help="no Meshcat recording")
+    p.add_argument("--print-config", action="store_true",
+                   help="print the configuration as YAML and exit")
+
+    def run(args):
+        from drake_tracker.servo.config import FEEDBACKS, servo_config_to_yaml
+
+        config = load_servo_config_arg(args.config, args.scenario)
+        if args.print_config:
+            print(servo_config_to_yaml(config), end="")
+            return 0
+        unknown = set((args.runs or "").split(",")) - set(FEEDBACKS) - {""}
+        if unknown:
+            raise UsageError(f"unknown runs {sorted(unknown)}; valid: {', '.join(FEEDBACKS)}")
+        params = load_params_arg(args.params or config.tracker_params or None)
+        check_out_dir(args.out)
+        from drake_tracker.servo.report import run_servo_command
+
+        return run_servo_command(args, config, params)
+
+    p.set_defaults(func=run)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``drake-tracker`` parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -284,7 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=_CommandParser)
     for add in (_add_demo, _add_record, _add_track, _add_bench, _add_evaluate,
-                _add_scenarios, _add_params):
+                _add_scenarios, _add_params, _add_servo):
         add(sub)
     return parser
 

@@ -110,6 +110,25 @@ def check_params_for_model(params, model, where: str) -> None:
         raise UsageError(f"{where}: {_one_line(err)}") from None
 
 
+def load_servo_config_arg(path: str | None, scenario: str | None = None):
+    """The :class:`~drake_tracker.servo.config.ServoStudyConfig` of ``--config path``
+    (default: the defaults), with ``--scenario`` over its ``scenario``; checked."""
+    from drake_tracker.servo.config import load_servo_config, validate_servo_config
+
+    if path and not Path(path).is_file():
+        raise UsageError(f"servo config '{path}' does not exist ('drake-tracker servo "
+                         "--print-config' prints the defaults as YAML)")
+    try:
+        config = load_servo_config(path)
+        if scenario:
+            config.scenario = scenario_name(scenario)
+            validate_servo_config(config)
+        resolve_scenario(config.scenario)
+    except ValueError as err:
+        raise UsageError(f"servo config: {_one_line(err)}") from None
+    return config
+
+
 def load_run_arg(path: str):
     """The :class:`~drake_tracker.recording.RecordedRun` of ``--run path``."""
     import zipfile

@@ -9,8 +9,6 @@ forward, as Drake's cameras), as an object detector on that camera would report 
 pose: the hand must reach each one and stay ``dwell_s``.
 """
 
-from __future__ import annotations
-
 from dataclasses import dataclass, field
 
 import numpy as np
