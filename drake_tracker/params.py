@@ -138,6 +138,19 @@ class ImageParams:
 
 
 @dataclass
+class TimestampParams:
+    """The time-stamp policy of each sensor stream (``core/timestamps.py``)."""
+
+    #: A stamp more than max(``min_future_jump_s``, this many of the stream's recent
+    #: sample periods) after the latest accepted one is rejected as a glitch.
+    max_future_jump_periods: float = 1000.0
+    min_future_jump_s: float = 30.0
+    #: A clock that stepped and stays there is re-anchored after this many consecutive
+    #: rejected stamps at the stream's normal pace.
+    reanchor_after_samples: int = 5
+
+
+@dataclass
 class TrackerParams:
     """Everything the tracker needs besides the robot model and the camera intrinsics."""
 
@@ -159,6 +172,8 @@ class TrackerParams:
     #: ``core/belief_buffer.py``); across a longer encoder gap the belief is predicted
     #: to the image time with the angle process.
     max_interpolation_gap_s: float = 0.05
+    #: Which sensor time stamps are accepted, and when a stepped clock is re-anchored.
+    timestamps: TimestampParams = field(default_factory=TimestampParams)
 
 
 def load_tracker_params(path: str | Path | None = None) -> TrackerParams:
@@ -245,6 +260,15 @@ def validate_tracker_params(params: TrackerParams) -> None:
     _check(math.isfinite(params.max_interpolation_gap_s)
            and params.max_interpolation_gap_s >= 0, "max_interpolation_gap_s",
            params.max_interpolation_gap_s, "must be finite and >= 0")
+    ts = params.timestamps
+    _check(math.isfinite(ts.max_future_jump_periods) and ts.max_future_jump_periods > 0,
+           "timestamps.max_future_jump_periods", ts.max_future_jump_periods,
+           "must be finite and > 0")
+    _check(math.isfinite(ts.min_future_jump_s) and ts.min_future_jump_s > 0,
+           "timestamps.min_future_jump_s", ts.min_future_jump_s, "must be finite and > 0")
+    _check(isinstance(ts.reanchor_after_samples, int) and ts.reanchor_after_samples >= 2,
+           "timestamps.reanchor_after_samples", ts.reanchor_after_samples,
+           "must be an integer >= 2")
 
 
 def joint_noise_for(params: TrackerParams, joint_names: list[str]) -> list[JointNoise]:

@@ -33,6 +33,13 @@ from drake_tracker.core.pipeline import (
     new_belief_buffer,
     robot_joint_indices,
 )
+from drake_tracker.core.timestamps import (
+    RateLimitedWarning,
+    ReadingGate,
+    StreamClock,
+    log_reanchor,
+    problem_kind,
+)
 from drake_tracker.params import TrackerParams, validate_tracker_params
 
 log = logging.getLogger(__name__)
@@ -67,6 +74,10 @@ class Tracker:
         self.num_images_applied = 0
         self.num_images_skipped = 0
         self._robot = robot_joint_indices(model)
+        stamps = self.params.timestamps
+        self.readings = ReadingGate(stamps, model.robot_joint_names, log)
+        self.image_clock = StreamClock("image", stamps, self.params.buffer_horizon_s)
+        self.warnings = RateLimitedWarning(log)
         if not self.params.use_joint_readings:
             self._start(0.0, None)
 
@@ -75,18 +86,21 @@ class Tracker:
 
     def add_reading(self, t: float, robot_reading: np.ndarray) -> None:
         """An encoder reading of the robot joints (``model.robot_joint_names`` order),
-        stamped ``t`` (s). Raises ValueError for a wrong length, NaN, or a stale stamp."""
+        stamped ``t`` (s). Raises ValueError for a wrong length. A reading with a value or
+        stamp that is not usable is skipped with a warning (``core/timestamps.py``): one
+        per run of non-finite values, rate-limited for stamps."""
         reading = np.asarray(robot_reading, float)
         if reading.shape != (len(self._robot),):
             raise ValueError(f"joint reading has shape {reading.shape}, expected "
                              f"({len(self._robot)},) for joints {self.model.robot_joint_names}")
+        t = self.readings.admit(t, reading)
+        if t is None:
+            return
         if not self.params.use_joint_readings:
             if self.buffer is not None:
                 self.buffer.advance_to(t)
             return
         if self.buffer is None:
-            if not np.all(np.isfinite(reading)):
-                raise ValueError("joint reading is not finite")
             self._start(t, reading)
         self.buffer.add_reading(t, full_reading(self.model, reading))
 
@@ -101,34 +115,40 @@ class Tracker:
             return False
         self.images.update.prepare(frame.depth_m)  # validates before anything changes
         if self.buffer is None:
-            log.warning("image %d skipped: no joint reading yet", frame.sequence)
-            self.num_images_skipped += 1
-            return False
-        t = self.images.image_time(frame)
+            return self._skip(frame, "no joint reading yet", "images before a reading")
+        decision = self.image_clock.check(self.images.image_time(frame))
+        if decision.reanchored_by_s is not None:
+            log_reanchor(log, "image", decision, frame.capture_time_s, self.image_clock)
+        t = decision.time_s
+        if t is None:
+            return self._skip(frame, decision.problem, decision.kind)
         if not self.params.use_joint_readings:
-            self.buffer.advance_to(max(t, frame.arrival_time_s))
-        if not self.images.wants(frame, self.next_image_due_s):
+            arrival = frame.arrival_time_s + decision.time_s - self.images.image_time(frame)
+            self.buffer.advance_to(max(t, arrival) if np.isfinite(arrival) else t)
+        if not self.images.wants_at(t, self.next_image_due_s, self.last_applied_image_s):
             self.num_images_skipped += 1
             return False
-        problem = self.buffer.image_time_problem(t)
+        problem = self.buffer.image_time_problem(t) or self.buffer.reading_gap_problem(t)
         if problem is not None:
-            log.warning("image %d skipped: %s", frame.sequence, problem)
-            self.num_images_skipped += 1
-            return False
+            return self._skip(frame, problem, problem_kind(problem))
         anchor = self.buffer.image_anchor(t)
         outcome = self.images.observe(
             frame, anchor.prior, jump_window_s(t, self.last_applied_image_s, self.health))
-        self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
+        if t >= self.last_applied_image_s:  # an out-of-order image does not pace the rest
+            self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
         self.last_result = outcome.result
         if outcome.observation is None:
-            log.warning("image %d skipped: no valid depth pixel", frame.sequence)
-            self.num_images_skipped += 1
-            return False
+            return self._skip(frame, "no valid depth pixel", "images without a valid pixel")
         self.health = next_health(self.health, outcome.consistency, self.params.health)
         self.buffer.add_image_observation(anchor, outcome.observation)
-        self.last_applied_image_s = t
+        self.last_applied_image_s = max(t, self.last_applied_image_s)
         self.num_images_applied += 1
         return True
+
+    def _skip(self, frame: DepthFrame, problem: str, kind: str) -> bool:
+        self.warnings.warn(kind, f"image {frame.sequence} skipped: {problem}")
+        self.num_images_skipped += 1
+        return False
 
     @property
     def started(self) -> bool:

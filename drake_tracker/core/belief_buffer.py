@@ -224,6 +224,26 @@ class BeliefBuffer:
             return f"stamped {t:.4f} s, it is from the future (now {self._now:.4f} s)"
         return None
 
+    def reading_gap_problem(self, t: float) -> str | None:
+        """Why an image stamped ``t`` inside the buffer should not be applied although it
+        could be: it falls in a gap of the joint readings longer than
+        ``max_interpolation_gap_s`` (e.g. a run of non-finite readings), where its prior
+        would be the angle process's prediction, radians wide. None without readings
+        (vision only) or when readings around ``t`` carry it (see ``image_anchor``)."""
+        if self._last_reading_time == -np.inf or not np.isfinite(t):
+            return None
+        k = bisect.bisect_right(self._times, t)
+        before, after = self._reading_around(k - 1, -1), self._reading_around(k, 1)
+        t0 = self._times[before] if before is not None else self._anchor_time
+        if t0 == t:
+            return None
+        t1 = self._times[after] if after is not None else self._now
+        if t1 - t0 <= self.max_interpolation_gap_s:
+            return None
+        return (f"stamped {t:.4f} s, it falls in a {t1 - t0:.3f} s gap of the joint readings "
+                f"({t0:.4f} s to {t1:.4f} s; max_interpolation_gap_s is "
+                f"{self.max_interpolation_gap_s:.3f} s)")
+
     def _reading_around(self, k: int, step: int) -> int | None:
         """Index of the nearest reading event from index ``k`` on, walking by ``step``."""
         while 0 <= k < len(self._events):

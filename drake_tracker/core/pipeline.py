@@ -135,12 +135,22 @@ class ImageProcessor:
     def image_time(self, frame: DepthFrame) -> float:
         return image_time(frame, self.params)
 
-    def wants(self, frame: DepthFrame, next_due_s: float) -> bool:
-        """Whether ``frame`` is due: its time is at or after ``next_due_s`` (see
-        ``next_due``); the others are skipped, so a fast camera builds up no backlog."""
+    def wants(self, frame: DepthFrame, next_due_s: float,
+              last_applied_s: float = -np.inf) -> bool:
+        """Whether ``frame`` is due (see ``wants_at``)."""
         if frame.is_empty or not self.params.image.enabled:
             return False
-        return self.image_time(frame) >= next_due_s - 1e-9
+        return self.wants_at(self.image_time(frame), next_due_s, last_applied_s)
+
+    @staticmethod
+    def wants_at(image_time_s: float, next_due_s: float,
+                 last_applied_s: float = -np.inf) -> bool:
+        """Whether an image at ``image_time_s`` is due: at or after ``next_due_s`` (see
+        ``next_due``; the others are skipped, so a fast camera builds up no backlog), or
+        older than the latest applied image (``last_applied_s``): an image that arrives
+        out of order is applied at its time, as the buffer allows, never dropped for the
+        pacing (whether it is inside the buffer's horizon is the buffer's check)."""
+        return bool(image_time_s >= next_due_s - 1e-9 or image_time_s < last_applied_s)
 
     def next_due(self, image_time_s: float, previous_due_s: float) -> float:
         """The earliest image time processed after an image at ``image_time_s``.

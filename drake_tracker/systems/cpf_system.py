@@ -13,6 +13,7 @@ from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import TrackerHealth, next_health
 from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
+from drake_tracker.core.timestamps import RateLimitedWarning, problem_kind
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
 
@@ -24,6 +25,8 @@ class CpfState:
     """The system's abstract state."""
 
     last_sequence: int = -1
+    #: (sequence, capture stamp) of the last frame seen: a new pair is a new frame.
+    last_frame: tuple = ()
     next_image_due_s: float = float("-inf")
     last_applied_image_s: float = float("-inf")
     message: ImageObservationMessage = field(default_factory=ImageObservationMessage)
@@ -36,8 +39,9 @@ class CpfState:
 
 class CpfImageUpdateSystem(LeafSystem):
     """Runs the CPF image update once per new depth image (a periodic unrestricted update
-    that compares the image's sequence number with the last one processed, since Python
-    systems cannot schedule their own next update time).
+    that compares the image's sequence number and capture stamp with the last frame's,
+    since Python systems cannot schedule their own next update time; a sequence counter
+    that restarts is logged once per restart).
 
     .. pydrake_system::
 
@@ -53,8 +57,8 @@ class CpfImageUpdateSystem(LeafSystem):
     ``image_prior`` where the delay buffer places that frame, with the angles' prior at
     its time. ``image_observation`` is an :class:`ImageObservationMessage` whose id grows
     by one per applied image; ``health`` the :class:`TrackerHealth` after it. The random
-    numbers of image ``k`` depend only on (``image.seed``, k). Malformed images and
-    images the buffer cannot place are skipped with a logged warning.
+    numbers of image ``k`` depend only on (``image.seed``, k). Malformed images, images
+    the buffer cannot place and failed updates are skipped with a rate-limited warning.
     """
 
     def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams,
@@ -64,6 +68,7 @@ class CpfImageUpdateSystem(LeafSystem):
             raise ValueError(f"CpfImageUpdateSystem: period_s must be > 0, got {period_s}")
         self.processor = ImageProcessor(model, camera, params)
         self._health_params = params.health
+        self._warnings = RateLimitedWarning(log)
         self._state = self.DeclareAbstractState(AbstractValue.Make(CpfState()))
         self._frame_port = self.DeclareAbstractInputPort(
             "depth_frame", AbstractValue.Make(DepthFrame.empty()))
@@ -85,11 +90,16 @@ class CpfImageUpdateSystem(LeafSystem):
     def _update(self, context, state):
         s: CpfState = copy.copy(self.state(context))
         frame: DepthFrame = self._frame_port.Eval(context)
-        if frame.is_empty or frame.sequence <= s.last_sequence:
+        key = (frame.sequence, repr(frame.capture_time_s))
+        if frame.is_empty or key == s.last_frame:
             return
-        if s.last_sequence >= 0:  # frames that came and went between two checks
-            s.images_skipped += frame.sequence - s.last_sequence - 1
-        s.last_sequence = frame.sequence
+        if frame.sequence < s.last_sequence:
+            log.warning("camera sequence counter restarted: image %d after image %d; "
+                        "frames are told apart by sequence and stamp", frame.sequence,
+                        s.last_sequence)
+        elif s.last_sequence >= 0:  # frames that came and went between two checks
+            s.images_skipped += max(frame.sequence - s.last_sequence - 1, 0)
+        s.last_sequence, s.last_frame = frame.sequence, key
         if self._process(frame, self._prior_port.Eval(context), s):
             s.images_applied += 1
         else:
@@ -99,27 +109,31 @@ class CpfImageUpdateSystem(LeafSystem):
     def _process(self, frame: DepthFrame, prior: ImagePrior, s: CpfState) -> bool:
         """Runs the image update on ``frame`` if it is due; True when it produced a
         new observation message."""
-        if not self.processor.wants(frame, s.next_image_due_s):
-            return False
+        t = prior.image_time_s
+        if prior.sequence == frame.sequence and t == t and not self.processor.wants_at(
+                t, s.next_image_due_s, s.last_applied_image_s):
+            return False  # not due (NaN: its stamp was rejected)
         if prior.anchor is None or prior.sequence != frame.sequence:
-            log.warning("image %d skipped: %s", frame.sequence, prior.problem)
-            return False
-        s.next_image_due_s = self.processor.next_due(prior.image_time_s, s.next_image_due_s)
+            return self._skip(frame, prior.problem)
+        if t >= s.last_applied_image_s:  # an out-of-order image does not pace the rest
+            s.next_image_due_s = self.processor.next_due(t, s.next_image_due_s)
         try:
-            window = jump_window_s(prior.image_time_s, s.last_applied_image_s, s.health)
+            window = jump_window_s(t, s.last_applied_image_s, s.health)
             outcome = self.processor.observe(frame, prior.anchor.prior, window)
-        except ValueError as err:
-            log.warning("image %d skipped: %s", frame.sequence, err)
-            return False
+        except Exception as err:  # one failed image never stops the simulation
+            return self._skip(frame, f"{type(err).__name__}: {err}")
         if outcome.observation is None:
-            log.warning("image %d skipped: no valid depth pixel", frame.sequence)
-            return False
+            return self._skip(frame, "no valid depth pixel")
         s.message = ImageObservationMessage(s.message.id + 1, frame.sequence,
                                             prior.image_time_s, outcome.observation,
                                             prior.anchor)
         s.health = next_health(s.health, outcome.consistency, self._health_params)
-        s.last_applied_image_s = prior.image_time_s
+        s.last_applied_image_s = max(t, s.last_applied_image_s)
         return True
+
+    def _skip(self, frame: DepthFrame, problem: str) -> bool:
+        self._warnings.warn(problem_kind(problem), f"image {frame.sequence} skipped: {problem}")
+        return False
 
     def _calc_message(self, context, output):
         output.set_value(self.state(context).message)

@@ -18,6 +18,7 @@ from drake_tracker.core.pipeline import (
     make_bank_and_prior,
     new_belief_buffer,
 )
+from drake_tracker.core.timestamps import ReadingGate, StampDecision, StreamClock, log_reanchor
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
 
@@ -32,6 +33,12 @@ class DelayBufferState:
     last_reading_time_s: float = float("-inf")
     last_observation_id: int = 0
     correction: BeliefCorrection = field(default_factory=BeliefCorrection)
+    #: The readings' and images' time-stamp policy (``core/timestamps.py``), the last
+    #: image it judged and its decision.
+    readings: ReadingGate | None = None
+    image_clock: StreamClock | None = None
+    frame_key: tuple = ()
+    frame_decision: StampDecision | None = None
 
     def __deepcopy__(self, memo) -> DelayBufferState:
         # BeliefBuffer copies cheaply (shared immutable arrays); the rest is small.
@@ -40,7 +47,16 @@ class DelayBufferState:
             last_reading_time_s=self.last_reading_time_s,
             last_observation_id=self.last_observation_id,
             correction=self.correction,  # never mutated: replaced by a new one
+            readings=copy.deepcopy(self.readings, memo),
+            image_clock=copy.deepcopy(self.image_clock, memo),
+            frame_key=self.frame_key, frame_decision=self.frame_decision,
         )
+
+
+def frame_key(frame: DepthFrame) -> tuple:
+    """What tells two frames apart: the sequence number may restart, the stamp may
+    repeat, both together do not."""
+    return frame.sequence, repr(frame.capture_time_s)
 
 
 class DelayBufferSystem(LeafSystem):
@@ -66,8 +82,9 @@ class DelayBufferSystem(LeafSystem):
     on ``depth_frame`` (capture stamp minus ``image_time_offset_s``), or the reason there
     is none (no reading yet, older than the horizon, from the future).
 
-    Images outside the buffer and readings with NaN or stale stamps are skipped with a
-    logged warning; nothing else is dropped.
+    Images outside the buffer or in a gap of the readings, and readings or images whose
+    values or stamps are not usable (``core/timestamps.py``), are skipped with a logged,
+    rate-limited warning; nothing else is dropped.
     """
 
     def __init__(self, model, params: TrackerParams, period_s: float, offset_s: float = 0.0):
@@ -77,7 +94,10 @@ class DelayBufferSystem(LeafSystem):
         self._model = model
         self._params = params
         make_bank_and_prior(model, params, None)  # validates the parameters now
-        self._state = self.DeclareAbstractState(AbstractValue.Make(DelayBufferState()))
+        stamps = params.timestamps
+        self._state = self.DeclareAbstractState(AbstractValue.Make(DelayBufferState(
+            readings=ReadingGate(stamps, model.robot_joint_names, log),
+            image_clock=StreamClock("image", stamps, params.buffer_horizon_s))))
         self.DeclareVectorInputPort("measured_position", len(model.robot_joint_names))
         self.DeclareVectorInputPort("measurement_time", 1)
         self.DeclareAbstractInputPort("image_observation",
@@ -94,21 +114,21 @@ class DelayBufferSystem(LeafSystem):
 
     def _update(self, context, state):
         s: DelayBufferState = state.get_mutable_abstract_state(int(self._state)).get_value()
-        t = float(self.get_input_port(1).Eval(context)[0])
-        if t > s.last_reading_time_s:
+        raw = float(self.get_input_port(1).Eval(context)[0])
+        if s.readings.is_new(raw):
             reading = np.array(self.get_input_port(0).Eval(context), float)
-            if not (np.isfinite(t) and np.all(np.isfinite(reading))):
-                log.warning("joint reading at %.4f s skipped: it is not finite", t)
-            elif self._params.use_joint_readings:
+            t = s.readings.admit(raw, reading)
+            if t is not None and self._params.use_joint_readings:
                 if s.buffer is None:
                     s.buffer = new_belief_buffer(self._model, self._params, t, reading)
                 s.buffer.add_reading(t, full_reading(self._model, reading))
                 s.last_reading_time_s = t
-            else:
+            elif t is not None:
                 if s.buffer is None:
                     s.buffer = new_belief_buffer(self._model, self._params, 0.0, None)
                 s.buffer.advance_to(t)
                 s.last_reading_time_s = t
+        self._judge_frame(self.get_input_port(3).Eval(context), s)
         message = self.get_input_port(2).Eval(context)
         if message.id > s.last_observation_id and message.observation is not None:
             s.last_observation_id = message.id
@@ -123,6 +143,15 @@ class DelayBufferSystem(LeafSystem):
                                                 s.last_reading_time_s, belief)
         state.get_mutable_abstract_state(int(self._state)).set_value(s)
 
+    def _judge_frame(self, frame: DepthFrame, s: DelayBufferState) -> None:
+        """Runs a new frame's stamp through the images' clock (once per frame)."""
+        if frame.is_empty or s.buffer is None or frame_key(frame) == s.frame_key:
+            return
+        s.frame_key = frame_key(frame)
+        s.frame_decision = s.image_clock.check(image_time(frame, self._params))
+        if s.frame_decision.reanchored_by_s is not None:
+            log_reanchor(log, "image", s.frame_decision, frame.capture_time_s, s.image_clock)
+
     def _calc_correction(self, context, output):
         output.set_value(context.get_abstract_state(int(self._state)).get_value().correction)
 
@@ -132,10 +161,17 @@ class DelayBufferSystem(LeafSystem):
         if frame.is_empty:
             output.set_value(ImagePrior())
             return
-        t = image_time(frame, self._params)
         if s.buffer is None:
-            output.set_value(ImagePrior(frame.sequence, t, None, "no joint reading yet"))
+            output.set_value(ImagePrior(frame.sequence, image_time(frame, self._params), None,
+                                        "no joint reading yet"))
             return
-        problem = s.buffer.image_time_problem(t)
+        # The decision the next update will take for a frame it has not judged yet.
+        decision = s.frame_decision if frame_key(frame) == s.frame_key else \
+            s.image_clock.peek(image_time(frame, self._params))
+        if decision.time_s is None:
+            output.set_value(ImagePrior(frame.sequence, float("nan"), None, decision.problem))
+            return
+        t = decision.time_s
+        problem = s.buffer.image_time_problem(t) or s.buffer.reading_gap_problem(t)
         anchor = None if problem else s.buffer.image_anchor(t)
         output.set_value(ImagePrior(frame.sequence, t, anchor, problem or ""))

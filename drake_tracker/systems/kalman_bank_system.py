@@ -11,6 +11,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
 from drake_tracker.core.pipeline import PoseReadout, full_reading, make_bank_and_prior
+from drake_tracker.core.timestamps import ReadingGate
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
 
@@ -40,16 +41,18 @@ class JointKalmanBankSystem(LeafSystem):
         - X_WC
 
     ``measured_position`` holds the robot joints' readings (``model.robot_joint_names``),
-    ``measurement_time`` its stamp (s; a stamp not after the last one is not a new
-    reading). ``correction`` is the delay buffer's :class:`BeliefCorrection`. Outputs
-    cover all of ``model.joint_names`` (virtual joints included): ``belief`` is the
-    (5, n) moment array flattened row-major; ``camera_offset`` the 6 virtual joints;
+    ``measurement_time`` its stamp (s; a stamp that changed marks a new reading, which
+    goes through the time-stamp policy of ``core/timestamps.py``). ``correction`` is the
+    delay buffer's :class:`BeliefCorrection`. Outputs cover all of ``model.joint_names``
+    (virtual joints included): ``belief`` is the (5, n) moment array flattened
+    row-major; ``camera_offset`` the 6 virtual joints;
     ``X_CE`` the hand in the estimated camera frame, ``X_WE`` the hand and ``X_WC`` the
     estimated camera in the model's world (RigidTransform). Before the first reading the
     estimate is the model's zero configuration.
 
     Discrete state: [belief (5n), belief time, last reading time, correction id,
-    started flag]. A reading with NaN is skipped with a logged warning.
+    started flag]; abstract state: the readings' :class:`ReadingGate`. Readings the
+    delay buffer skips are skipped here too (the buffer logs them).
     """
 
     def __init__(self, model, params: TrackerParams, period_s: float, offset_s: float = 0.0):
@@ -67,6 +70,8 @@ class JointKalmanBankSystem(LeafSystem):
         x0[5 * n] = np.nan
         x0[5 * n + 1] = -np.inf
         self._state = self.DeclareDiscreteState(x0)
+        self._gate = self.DeclareAbstractState(AbstractValue.Make(
+            ReadingGate(params.timestamps, model.robot_joint_names, logger=None)))
         self.DeclareVectorInputPort("measured_position", self._robot_n)
         self.DeclareVectorInputPort("measurement_time", 1)
         self.DeclareAbstractInputPort("correction", AbstractValue.Make(BeliefCorrection()))
@@ -86,7 +91,7 @@ class JointKalmanBankSystem(LeafSystem):
                                        lambda c, o: self._calc_pose(c, o, 1), deps)
         self.DeclareAbstractOutputPort("X_WC", lambda: AbstractValue.Make(RigidTransform()),
                                        lambda c, o: self._calc_pose(c, o, 2), deps)
-        self.DeclarePeriodicDiscreteUpdateEvent(period_s, offset_s, self._update)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
 
     # ----------------------------------------------------------------- state access
     def _unpack(self, context):
@@ -99,7 +104,7 @@ class JointKalmanBankSystem(LeafSystem):
         return np.concatenate([np.asarray(belief, float).ravel(),
                                [time_s, last_reading_s, correction_id, float(started)]])
 
-    def _update(self, context, discrete_state):
+    def _update(self, context, state):
         belief, time_s, last_reading, correction_id, started = self._unpack(context)
         belief = belief.copy()
         correction = self.get_input_port(2).Eval(context)
@@ -109,12 +114,12 @@ class JointKalmanBankSystem(LeafSystem):
             last_reading = correction.last_reading_time_s
             correction_id = correction.id
             started = True
-        t = float(self.get_input_port(1).Eval(context)[0])
-        if self._params.use_joint_readings and t > last_reading:
+        raw = float(self.get_input_port(1).Eval(context)[0])
+        gate: ReadingGate = state.get_mutable_abstract_state(self._gate).get_value()
+        if self._params.use_joint_readings and gate.is_new(raw):
             reading = np.array(self.get_input_port(0).Eval(context), float)
-            if not np.all(np.isfinite(reading)) or not np.isfinite(t):
-                log.warning("joint reading at %.4f s skipped: it is not finite", t)
-            else:
+            t = gate.admit(raw, reading)
+            if t is not None and t > last_reading:
                 if not started:
                     _, belief = make_bank_and_prior(self._model, self._params, reading)
                     time_s, started = t, True
@@ -122,8 +127,9 @@ class JointKalmanBankSystem(LeafSystem):
                                                    full_reading(self._model, reading))
                 time_s = t
                 last_reading = t
-        discrete_state.get_mutable_vector(self._state).SetFromVector(
+        state.get_mutable_discrete_state(self._state).SetFromVector(
             self._pack(belief, time_s, last_reading, correction_id, started))
+        state.get_mutable_abstract_state(self._gate).set_value(gate)
 
     # ----------------------------------------------------------------- outputs
     def _calc_belief(self, context, output: BasicVector):

@@ -1,0 +1,233 @@
+"""The time-stamp policy: which stamps of a sensor stream the tracker accepts.
+
+One :class:`StreamClock` per stream (the joint readings, the depth images) maps each
+raw stamp to the tracker's time base, or rejects it with a reason:
+
+* a stamp that is not finite;
+* a stamp far in the future: more than ``max(min_future_jump_s,
+  max_future_jump_periods x the stream's recent sample period)`` after the latest
+  accepted one (a glitched stamp, e.g. +1000 s);
+* a stamp behind the latest accepted one (by more than ``max_behind_s``: 0 for the
+  readings, which must come in order; the buffer horizon for images, which may come in
+  any order).
+
+A rejected stamp changes nothing, so one glitch never poisons later data. A clock that
+steps back or forward *and stays there* is different: ``reanchor_after_samples``
+consecutive rejected stamps that follow each other at the stream's normal pace are
+taken as the clock's new time base, and the stream is re-anchored: from then on its
+stamps are shifted so that they continue one recent period after the latest accepted
+stamp. The tracker keeps its belief and its buffer; the samples of the run before the
+re-anchoring one are lost. (Taking every re-anchored clock to continue where it was keeps
+a camera whose clock did not step aligned with encoders whose clock did.)
+
+:class:`RateLimitedWarning` logs each kind of problem at its 1st, 10th, 100th, ...
+occurrence, with the count; :class:`ReadingGate` adds the joint values' check: a run of
+non-finite readings (an encoder gap) gets one warning when it starts and one info line
+when it ends.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_tracker.params import TimestampParams
+
+_log = logging.getLogger(__name__)
+
+#: Accepted gaps kept to estimate a stream's recent sample period (their median).
+RECENT_GAPS = 16
+
+
+class RateLimitedWarning:
+    """Logs the 1st, 10th, 100th, ... warning of each ``kind``, with the count so far."""
+
+    def __init__(self, logger: logging.Logger, enabled: bool = True):
+        self.logger = logger
+        self.enabled = enabled
+        self.counts: dict[str, int] = {}
+
+    def warn(self, kind: str, message: str) -> None:
+        count = self.counts.get(kind, 0) + 1
+        self.counts[kind] = count
+        if self.enabled and _is_power_of_ten(count):
+            suffix = "" if count == 1 else f" ({count} {kind} so far; logged at 1, 10, 100, ...)"
+            self.logger.warning("%s%s", message, suffix)
+
+
+def _is_power_of_ten(count: int) -> bool:
+    while count % 10 == 0:
+        count //= 10
+    return count == 1
+
+
+@dataclass(frozen=True)
+class StampDecision:
+    """What :meth:`StreamClock.check` made of a raw stamp."""
+
+    #: The stamp in the tracker's time base (s), or None when rejected.
+    time_s: float | None
+    #: Why it was rejected ("" when accepted).
+    problem: str = ""
+    #: Short name of the problem (the rate limiter's key).
+    kind: str = ""
+    #: The shift (s) added to this stream's stamps from now on, when this stamp
+    #: re-anchored the stream; else None.
+    reanchored_by_s: float | None = None
+
+
+class StreamClock:
+    """The time-stamp policy of one stream (see the module docstring).
+
+    Args:
+        name: the stream's name in messages ("joint reading", "image").
+        params: thresholds.
+        max_behind_s: how far behind the latest accepted stamp a stamp may be (s);
+            0 demands strictly increasing stamps.
+    """
+
+    def __init__(self, name: str, params: TimestampParams, max_behind_s: float = 0.0):
+        self.name = name
+        self.params = params
+        self.max_behind_s = float(max_behind_s)
+        self.offset_s = 0.0
+        self.latest_s: float | None = None
+        self._gaps: deque[float] = deque(maxlen=RECENT_GAPS)
+        self._run_count = 0
+        self._run_first_raw = 0.0
+        self._run_last_raw = 0.0
+
+    @property
+    def recent_period_s(self) -> float:
+        """Median of the latest accepted gaps (0 before two stamps)."""
+        return float(np.median(self._gaps)) if self._gaps else 0.0
+
+    def future_limit_s(self) -> float:
+        """How far after the latest accepted stamp a stamp may be (s)."""
+        p = self.params
+        return max(p.min_future_jump_s, p.max_future_jump_periods * self.recent_period_s)
+
+    def peek(self, raw_s: float) -> StampDecision:
+        """What :meth:`check` would decide, without changing anything."""
+        return copy.deepcopy(self).check(raw_s)
+
+    def check(self, raw_s: float) -> StampDecision:
+        """Maps ``raw_s`` to the tracker's time base, or rejects it (see the module)."""
+        raw = float(raw_s)
+        if not np.isfinite(raw):
+            return StampDecision(None, f"its time stamp {raw} is not finite", "non-finite stamps")
+        if self.latest_s is None:
+            return self._accept(raw)
+        t = raw + self.offset_s
+        gap = t - self.latest_s
+        if gap > self.future_limit_s():
+            problem = (f"stamped {raw:.4f} s, it is {gap:.3f} s after the latest accepted "
+                       f"{self.name} ({self.latest_s - self.offset_s:.4f} s): far in the "
+                       f"future (limit {self.future_limit_s():.3f} s)")
+            kind = "stamps far in the future"
+        elif gap < -self.max_behind_s or (self.max_behind_s == 0 and gap <= 0):
+            latest = f"the latest accepted {self.name} ({self.latest_s - self.offset_s:.4f} s)"
+            problem = (f"stamped {raw:.4f} s, it is older than {latest} by more than "
+                       f"{self.max_behind_s:.3f} s" if self.max_behind_s > 0 else
+                       f"stamped {raw:.4f} s, it is not after {latest}")
+            kind = "stamps behind the latest"
+        else:
+            return self._accept(raw)
+        return self._rejected(raw, problem, kind)
+
+    def _accept(self, raw: float, reanchored_by: float | None = None) -> StampDecision:
+        t = raw + self.offset_s
+        if self.latest_s is not None and t > self.latest_s:
+            self._gaps.append(t - self.latest_s)
+        self.latest_s = t if self.latest_s is None else max(self.latest_s, t)
+        self._run_count = 0
+        return StampDecision(t, reanchored_by_s=reanchored_by)
+
+    def _rejected(self, raw: float, problem: str, kind: str) -> StampDecision:
+        """Counts a run of rejected stamps at the stream's pace; re-anchors after enough."""
+        limit = max(self.future_limit_s(), 0.0)
+        follows = self._run_count > 0 and 0 < raw - self._run_last_raw <= limit
+        if follows:
+            self._run_count += 1
+        else:
+            self._run_count, self._run_first_raw = 1, raw
+        self._run_last_raw = raw
+        if self._run_count < self.params.reanchor_after_samples:
+            return StampDecision(None, problem, kind)
+        new_offset = self.latest_s + self.recent_period_s - self._run_first_raw
+        shift = new_offset - self.offset_s
+        self.offset_s = new_offset
+        return self._accept(raw, reanchored_by=shift)
+
+
+class ReadingGate:
+    """The joint readings' policy: new-sample detection, the stamp's :class:`StreamClock`,
+    and one warning per run of non-finite values (an encoder gap).
+
+    ``admit`` returns the reading's time in the tracker's time base, or None when it is
+    skipped (logged through ``warnings``; ``logger=None`` keeps it quiet, for a second
+    consumer of the same stream that must take the same decisions).
+    """
+
+    def __init__(self, params: TimestampParams, joint_names: list[str],
+                 logger: logging.Logger | None = _log):
+        self.clock = StreamClock("joint reading", params)
+        self.joint_names = list(joint_names)
+        self.warnings = RateLimitedWarning(logger or _log, enabled=logger is not None)
+        self.logger = logger
+        self.last_raw_s = float("nan")
+        self.gap_start_s: float | None = None
+        self.gap_readings = 0
+
+    def is_new(self, raw_s: float) -> bool:
+        """Whether a stamp held on a port is a new sample (differs from the last seen)."""
+        raw = float(raw_s)
+        return not (raw == self.last_raw_s or (np.isnan(raw) and np.isnan(self.last_raw_s)))
+
+    def admit(self, raw_s: float, values: np.ndarray) -> float | None:
+        self.last_raw_s = float(raw_s)
+        bad = ~np.isfinite(values)
+        if np.any(bad):
+            if self.gap_start_s is None:
+                self.gap_start_s = float(raw_s)
+                names = [n for n, b in zip(self.joint_names, bad, strict=True) if b]
+                if self.logger:
+                    self.logger.warning(
+                        "joint reading stamped %.4f s is not finite (%s): readings are "
+                        "skipped until they are finite again (one warning per gap)",
+                        raw_s, ", ".join(names))
+            self.gap_readings += 1
+            return None
+        decision = self.clock.check(raw_s)
+        if decision.time_s is None:
+            self.warnings.warn(decision.kind, f"joint reading skipped: {decision.problem}")
+            return None
+        if self.gap_start_s is not None:
+            if self.logger:
+                self.logger.info("joint readings finite again at %.4f s after %d skipped "
+                                 "from %.4f s", raw_s, self.gap_readings, self.gap_start_s)
+            self.gap_start_s, self.gap_readings = None, 0
+        if decision.reanchored_by_s is not None and self.logger:
+            log_reanchor(self.logger, "joint reading", decision, raw_s, self.clock)
+        return decision.time_s
+
+
+def log_reanchor(logger: logging.Logger, name: str, decision: StampDecision, raw_s: float,
+                 clock: StreamClock) -> None:
+    """The one message of a re-anchored stream."""
+    logger.warning("%s clock re-anchored: its stamps stepped and stayed there for %d "
+                   "samples (now %.4f s); from now on they are shifted by %+.4f s; the "
+                   "belief is kept", name, clock.params.reanchor_after_samples, raw_s,
+                   decision.reanchored_by_s)
+
+
+def problem_kind(problem: str) -> str:
+    """A short, stable name for a buffer's or image's problem (the rate limiter's key)."""
+    for words in ("not finite", "future", "older than", "gap", "no valid depth pixel"):
+        if words in problem:
+            return f"images: {words}"
+    return "images: other problems"

@@ -1,0 +1,291 @@
+"""The time-stamp policy (core/timestamps.py) and issue 14's time-stamp findings: a glitched
+stamp, a clock that steps back, a camera counter that restarts, an image out of order,
+a burst of non-finite readings, each in the offline tracker and in the Diagram."""
+
+import logging
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_tracker.core.belief_buffer import BeliefBuffer
+from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.pipeline import full_reading, new_belief_buffer
+from drake_tracker.core.timestamps import RateLimitedWarning, StreamClock
+from drake_tracker.params import TimestampParams, TrackerParams, validate_tracker_params
+from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.synthetic import synthetic_run
+from drake_tracker.systems.add_tracker import AddTracker
+from drake_tracker.systems.recorded_run_source import RecordedRunSource
+from drake_tracker.tracker import Tracker
+
+H = 1.0 / 200.0  # the synthetic runs' encoder period (s)
+
+
+@pytest.fixture(scope="module")
+def apollo():
+    return build_tracker_model(robot_preset("apollo"))
+
+
+@pytest.fixture(scope="module")
+def run(apollo):
+    return synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7)
+
+
+def small_params() -> TrackerParams:
+    p = TrackerParams()
+    p.image.num_particles = 20
+    p.image.annealing_betas = [0.1, 1.0]
+    p.image.min_image_interval_s = 0.0
+    return p
+
+
+# ----------------------------------------------------------------- the policy itself
+def test_a_glitch_is_rejected_and_does_not_poison_later_stamps():
+    clock = StreamClock("joint reading", TimestampParams())
+    stamps = [0.0, 0.005, 0.010, 1000.015, 0.020, 1e6, 0.025, np.inf, np.nan, 0.030]
+    times = [clock.check(t).time_s for t in stamps]
+    assert times == [0.0, 0.005, 0.010, None, 0.020, None, 0.025, None, None, 0.030]
+    assert "far in the future" in clock.check(500.0).problem
+    assert "not after" in clock.check(0.030).problem
+    assert "not finite" in clock.check(np.nan).problem
+
+
+@pytest.mark.parametrize("step_s", [-1.0, 200.0])
+def test_a_clock_that_steps_and_stays_is_reanchored_after_n_samples(step_s):
+    p = TimestampParams(reanchor_after_samples=4)
+    clock = StreamClock("joint reading", p)
+    raw = [0.005 * k for k in range(20)] + [0.005 * k + step_s for k in range(20, 40)]
+    decisions = [clock.check(t) for t in raw]
+    rejected = [k for k, d in enumerate(decisions) if d.time_s is None]
+    assert rejected == [20, 21, 22]  # the 4th consistent sample re-anchors
+    assert decisions[23].reanchored_by_s == pytest.approx(-step_s, abs=1e-9)
+    accepted = np.array([d.time_s for d in decisions if d.time_s is not None])
+    assert np.all(np.diff(accepted) > 0)
+    # The time base continues: the re-anchored stream goes on at its own pace.
+    np.testing.assert_allclose(np.diff(accepted[20:]), 0.005, atol=1e-9)
+    assert accepted[20] == pytest.approx(0.095 + 0.005 * 4)
+
+
+def test_images_may_come_out_of_order_within_the_window():
+    clock = StreamClock("image", TimestampParams(), max_behind_s=1.0)
+    assert [clock.check(t).time_s for t in (1.0, 1.1, 1.05, 0.5)] == [1.0, 1.1, 1.05, 0.5]
+    assert "older than" in clock.check(0.05).problem
+
+
+def test_warnings_are_rate_limited_per_kind(caplog):
+    warnings = RateLimitedWarning(logging.getLogger("test"))
+    with caplog.at_level(logging.WARNING):
+        for _ in range(150):
+            warnings.warn("a", "problem a")
+        warnings.warn("b", "problem b")
+    assert len(caplog.records) == 4  # a at 1, 10, 100; b at 1
+    assert "100 a so far" in caplog.records[2].getMessage()
+
+
+def test_timestamp_params_are_validated_by_name():
+    p = TrackerParams()
+    p.timestamps.reanchor_after_samples = 1
+    with pytest.raises(ValueError, match="timestamps.reanchor_after_samples"):
+        validate_tracker_params(p)
+    p = TrackerParams()
+    p.timestamps.min_future_jump_s = float("inf")
+    with pytest.raises(ValueError, match="timestamps.min_future_jump_s"):
+        validate_tracker_params(p)
+
+
+# ----------------------------------------------------------------- feeding runs with faults
+def feed(tracker: Tracker, run, stamps=None, sequences=None, arrivals=None,
+         readings=None, sample_times=None):
+    """Feeds ``run`` in arrival order, with faulty reading stamps, image sequence numbers,
+    image arrival times or reading values; returns the estimates after each sample time
+    (default: after each reading) and whether each image was applied."""
+    stamps = run.reading_times_s if stamps is None else stamps
+    sequences = np.arange(len(run.image_capture_times_s)) if sequences is None else sequences
+    arrivals = run.image_arrival_times_s if arrivals is None else arrivals
+    readings = run.readings_rad if readings is None else readings
+    times = run.reading_times_s + 0.6 * H if sample_times is None else sample_times
+    order = np.argsort(arrivals, kind="stable")
+    estimates, applied, i, s = [], {}, 0, 0
+
+    def sample_until(limit):
+        nonlocal s
+        while s < len(times) and times[s] < limit:
+            estimates.append(tracker.estimate().positions if tracker.started else None)
+            s += 1
+
+    for k, t in enumerate(run.reading_times_s):
+        while i < len(order) and arrivals[order[i]] < t:
+            j = order[i]
+            sample_until(arrivals[j])
+            applied[j] = tracker.add_image(DepthFrame(
+                float(run.image_capture_times_s[j]), float(arrivals[j]),
+                run.depth_images_m[j], int(sequences[j])))
+            i += 1
+        sample_until(t)
+        tracker.add_reading(float(stamps[k]), readings[k])
+    sample_until(np.inf)
+    return estimates, applied
+
+
+def test_offline_tracker_survives_a_glitched_stamp_exactly(apollo, run, caplog):
+    """Finding 1: a +1000 s stamp ended tracking for good ("not after the previous
+    one" for every later reading). Now it is as if that one reading were missing."""
+    glitched = run.reading_times_s.copy()
+    glitched[30] += 1000.0
+    with caplog.at_level(logging.WARNING):
+        faulty, applied = feed(Tracker(apollo, run.camera_intrinsics, small_params()), run,
+                               stamps=glitched)
+    assert "far in the future" in caplog.text and "1000.1500" in caplog.text
+    missing = run.readings_rad.copy()
+    missing[30] = np.nan  # the same run without that reading (skipped as non-finite)
+    clean, applied_clean = feed(Tracker(apollo, run.camera_intrinsics, small_params()), run,
+                                readings=missing)
+    assert applied == applied_clean and sum(applied.values()) >= 10
+    for a, b in zip(faulty[1:], clean[1:], strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_offline_tracker_reanchors_a_clock_that_steps_back(apollo, run, caplog):
+    """Finding 2: after a 1 s step back, readings were ignored for 1 s and no image was
+    applied. Now the clock is re-anchored after N samples and images keep coming: the
+    same as the run without the N - 1 readings rejected before the re-anchoring."""
+    p = small_params()
+    n = p.timestamps.reanchor_after_samples
+    step = np.searchsorted(run.reading_times_s, 0.2)
+    stepped = run.reading_times_s - 1.0 * (np.arange(len(run.reading_times_s)) >= step)
+    with caplog.at_level(logging.WARNING):
+        tracker = Tracker(apollo, run.camera_intrinsics, p)
+        estimates, applied = feed(tracker, run, stamps=stepped)
+    assert caplog.text.count("re-anchored") == 1 and "not after" in caplog.text
+    assert tracker.estimate().time_s == pytest.approx(run.reading_times_s[-1], abs=1e-9)
+    late = [j for j in applied if run.image_capture_times_s[j] > 0.25]
+    assert len(late) >= 4 and all(applied[j] for j in late)
+    missing = run.readings_rad.copy()
+    missing[step:step + n - 1] = np.nan
+    clean, applied_clean = feed(Tracker(apollo, run.camera_intrinsics, p), run,
+                                readings=missing)
+    assert applied == applied_clean
+    np.testing.assert_allclose(np.array(estimates[1:]), np.array(clean[1:]), rtol=0,
+                               atol=1e-9)
+
+
+def test_an_image_out_of_order_is_applied_at_its_time_exactly(apollo, run, monkeypatch):
+    """Finding 4: an image older than the last applied one was dropped silently. Now it
+    is applied at its capture time; the belief is the one of the same observations
+    inserted in time order (the buffer is exact for out-of-order images)."""
+    arrivals = run.image_arrival_times_s.copy()
+    arrivals[6] = arrivals[7] + 2 * H  # image 6 arrives after image 7
+    stored = []
+    original = BeliefBuffer.add_image_observation
+
+    def recording(buffer, anchor, observation):
+        stored.append((anchor, observation))
+        original(buffer, anchor, observation)
+
+    monkeypatch.setattr(BeliefBuffer, "add_image_observation", recording)
+    p = small_params()
+    tracker = Tracker(apollo, run.camera_intrinsics, p)
+    _, applied = feed(tracker, run, arrivals=arrivals)
+    assert applied[6] and applied[7] and all(applied.values())
+    times = [anchor.image_time_s for anchor, _ in stored]
+    assert times != sorted(times)  # really applied out of order
+    reference = new_belief_buffer(apollo, p, run.reading_times_s[0], run.readings_rad[0])
+    for t, reading in zip(run.reading_times_s, run.readings_rad, strict=True):
+        reference.add_reading(t, full_reading(apollo, reading))
+    for anchor, observation in sorted(stored, key=lambda pair: pair[0].image_time_s):
+        original(reference, anchor, observation)
+    np.testing.assert_allclose(tracker.buffer.present()[1], reference.present()[1],
+                               rtol=1e-12, atol=1e-14)
+
+
+def test_a_nan_burst_gives_one_warning_and_no_wide_prior(apollo, run, caplog):
+    """Finding 7: one warning per gap, not per reading; an image inside the gap is
+    skipped (it would have a radians-wide prior), the others are applied."""
+    burst = run.readings_rad.copy()
+    gap = (run.reading_times_s >= 0.15) & (run.reading_times_s < 0.3)
+    burst[gap, 1] = np.nan
+    with caplog.at_level(logging.INFO):
+        tracker = Tracker(apollo, run.camera_intrinsics, small_params())
+        _, applied = feed(tracker, run, readings=burst)
+    warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+    nan_warnings = [r for r in warnings if "not finite" in r.getMessage()]
+    assert len(nan_warnings) == 1 and apollo.robot_joint_names[1] in caplog.text
+    assert "finite again" in caplog.text
+    inside = [j for j in applied if 0.15 < run.image_capture_times_s[j] < 0.295]
+    assert inside and not any(applied[j] for j in inside)
+    assert "gap of the joint readings" in caplog.text
+    outside = [j for j in applied if run.image_capture_times_s[j] > 0.3]
+    assert outside and all(applied[j] for j in outside)
+    assert np.all(np.sqrt(tracker.estimate().position_variances) < 0.1)
+
+
+# ----------------------------------------------------------------- the same in the Diagram
+class FaultySource(RecordedRunSource):
+    """A RecordedRunSource whose reading stamps and image sequence numbers are given."""
+
+    def __init__(self, run, stamps, sequences):
+        super().__init__(run)
+        self.stamps, self.sequences = stamps, sequences
+
+    def _calc_time(self, context, output):
+        k = self._latest_reading(context.get_time())
+        output.SetAtIndex(0, self.stamps[k] if k >= 0 else -1.0)
+
+    def _calc_frame(self, context, output):
+        super()._calc_frame(context, output)
+        frame = output.get_value()
+        if not frame.is_empty:
+            output.set_value(DepthFrame(frame.capture_time_s, frame.arrival_time_s,
+                                        frame.depth_m, int(self.sequences[frame.sequence])))
+
+
+def test_diagram_survives_glitch_step_restart_and_order_like_the_offline_tracker(
+        apollo, run, caplog):
+    """Findings 1-4 inside the Diagram: a +1000 s stamp, a 1 s step back of the encoder
+    clock, a camera counter restart and an image out of order. Before, the Diagram
+    stopped taking readings at the glitch (439 mm from then on) and ignored the images
+    after the restart; now it gives the offline tracker's estimates."""
+    stamps = run.reading_times_s.copy()
+    stamps[20] += 1000.0
+    stamps[60:] -= 1.0
+    sequences = np.arange(len(run.image_capture_times_s))
+    sequences[8:] -= 8  # the counter restarts at image 8
+    arrivals = run.image_arrival_times_s.copy()
+    arrivals[4] = arrivals[5] + 2 * H  # image 4 arrives after image 5
+    run = _with_arrivals(run, arrivals)
+    p = small_params()
+    builder = DiagramBuilder()
+    source = builder.AddSystem(FaultySource(run, stamps, sequences))
+    tracker = AddTracker(builder, apollo, run.camera_intrinsics, p,
+                         source.GetOutputPort("measured_position"),
+                         source.GetOutputPort("measurement_time"),
+                         source.GetOutputPort("depth_frame"), encoder_period_s=H)
+    simulator = Simulator(builder.Build())
+    sample_times = run.reading_times_s + 0.6 * H
+    offline, applied = feed(Tracker(apollo, run.camera_intrinsics, p), run, stamps=stamps,
+                            sequences=sequences, sample_times=sample_times)
+    assert all(applied.values())
+    caplog.clear()
+    context = simulator.get_mutable_context()
+    bank_context = tracker.kalman_bank.GetMyContextFromRoot(context)
+    with caplog.at_level(logging.WARNING):
+        diagram = []
+        for t in sample_times:
+            simulator.AdvanceTo(t)
+            diagram.append(tracker.port("estimated_position").Eval(bank_context).copy())
+    assert "restarted" in caplog.text and caplog.text.count("re-anchored") == 1
+    assert "far in the future" in caplog.text
+    settled = np.array([not np.any((arrivals > t - 2.5 * H) & (arrivals <= t))
+                        for t in sample_times])
+    difference = np.abs(np.array(diagram)[settled] - np.array(offline)[settled])
+    assert np.max(difference) <= 1e-9, np.max(difference)
+    cpf = tracker.image_update.GetMyContextFromRoot(context).get_abstract_state(0)
+    assert cpf.get_value().images_applied == len(applied)
+
+
+def _with_arrivals(run, arrivals):
+    from dataclasses import replace
+
+    return replace(run, image_arrival_times_s=arrivals)
