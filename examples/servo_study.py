@@ -7,14 +7,16 @@ Run: python examples/servo_study.py [--duration 13] [--scenario static/time-vary
 The Diagram, once per feedback (a, b, c), is
 
     world (dynamic plant + joint servo + biased encoders [+ depth camera])
-      -> X_CE feedback: (a) forward kinematics of the encoders, nominal camera
-                        (b) drake_tracker's AddTracker(...).port("X_CE")
+      -> feedback (X_CE and joint angles):
+                        (a) forward kinematics of the encoders, nominal camera
+                        (b) drake_tracker's AddTracker(...): X_CE, estimated_position
                         (c) the truth
       -> CameraFrameServo (Cartesian law in the camera frame + Drake's differential IK)
       -> the joint servo's command (InverseDynamicsController)
 
-Swap ``CameraFrameServo`` for your own controller: it only needs an ``X_CE`` input (the
-hand in the camera frame) and the encoders, and outputs [valid, q, v] of the arm joints.
+Swap ``CameraFrameServo`` for your own controller: it needs an ``X_CE`` input (the hand
+in the camera frame), joint angles and the encoders, and outputs [valid, q, v] of the arm
+joints.
 """
 
 import argparse
@@ -23,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import MatrixGain
 
 from drake_tracker.params import TrackerParams
 from drake_tracker.servo.config import FEEDBACK_LABELS, FEEDBACKS, ServoStudyConfig
@@ -45,7 +48,7 @@ def build(config: ServoStudyConfig, feedback: str, scenario, params: TrackerPara
         fk = builder.AddSystem(EncoderKinematicsPose(world.robot_config,
                                                      world.robot_joint_names))
         builder.Connect(world.ports["measured_position"], fk.get_input_port(0))
-        X_CE = fk.GetOutputPort("X_CE")
+        X_CE, joints = fk.GetOutputPort("X_CE"), world.ports["measured_position"]
     elif feedback == "tracker":  # (b) drake_tracker next to the plant and the camera
         tracker = AddTracker(builder, world.model, camera_model(scenario), params,
                              measured_position=world.ports["measured_position"],
@@ -53,11 +56,19 @@ def build(config: ServoStudyConfig, feedback: str, scenario, params: TrackerPara
                              depth=world.ports["depth_frame"],
                              encoder_period_s=world.encoder_period_s)
         X_CE = tracker.port("X_CE")
+        # Its joint estimate covers the six virtual camera joints too: keep the robot's.
+        select = np.array([[1.0 if name == robot_name else 0.0
+                            for name in world.model.joint_names]
+                           for robot_name in world.robot_joint_names])
+        robot_joints = builder.AddSystem(MatrixGain(select))
+        builder.Connect(tracker.port("estimated_position"), robot_joints.get_input_port())
+        joints = robot_joints.get_output_port()
     else:  # (c) the ideal
-        X_CE = world.ports["true_X_CE"]
+        X_CE, joints = world.ports["true_X_CE"], world.ports["true_position"]
     controller = builder.AddSystem(CameraFrameServo(
         world.robot_config, world.robot_joint_names, world.arm_joint_names, config))
     builder.Connect(X_CE, controller.GetInputPort("X_CE"))
+    builder.Connect(joints, controller.GetInputPort("estimated_position"))
     builder.Connect(world.ports["measured_position"],
                     controller.GetInputPort("measured_position"))
     builder.Connect(world.ports["measurement_time"],

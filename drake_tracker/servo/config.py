@@ -36,7 +36,7 @@ class ServoTarget:
     xyz_m: list[float] = field(default_factory=lambda: [-0.10, -0.15, 1.10])
     rpy_deg: list[float] = field(default_factory=lambda: [-20.0, -32.0, 90.0])
     #: How long the controller servos to this target before the next one (s).
-    dwell_s: float = 3.0
+    dwell_s: float = 4.0
 
     def X_CT(self) -> RigidTransform:
         """The target as a RigidTransform in the camera frame."""

@@ -12,7 +12,9 @@ Every ``control_period_s`` the :class:`CameraFrameServo`
 3. solves for arm joint velocities with ``DoDifferentialInverseKinematics`` (a QP: J v
    along V, joint position and speed limits, the null space pulled towards the start
    pose), with J the Jacobian of E in C of the NOMINAL robot model at the commanded
-   angles;
+   angles corrected by the feedback's joint estimate (``q_cmd + estimate - reading``:
+   the encoders' own angles in run (a), the tracker's bias-corrected ones in (b), the
+   true ones in (c));
 4. integrates them into the commanded arm angles (encoder coordinates), which the
    robot's joint servo holds (``drake_tracker.servo.world``).
 
@@ -88,6 +90,7 @@ class CameraFrameServo(LeafSystem):
         name: CameraFrameServo
         input_ports:
         - X_CE
+        - estimated_position
         - measured_position
         - measurement_time
         output_ports:
@@ -95,6 +98,7 @@ class CameraFrameServo(LeafSystem):
         - target_index
 
     ``X_CE``: AbstractValue[RigidTransform], the hand in the camera frame it is fed;
+    ``estimated_position`` (n): the robot joints' angles it is fed (for the Jacobian);
     ``measured_position`` (n) and ``measurement_time`` (1): the encoders, in
     ``robot_joint_names`` order. ``arm_command`` (1 + 2m): [valid, q, v] of the arm
     joints in encoder coordinates; ``target_index`` (1): the target servoed to (-1
@@ -125,6 +129,7 @@ class CameraFrameServo(LeafSystem):
         self._warn_feedback = _RateLimitedWarning()
         self._warn_ik = _RateLimitedWarning()
         self.DeclareAbstractInputPort("X_CE", AbstractValue.Make(RigidTransform()))
+        self.DeclareVectorInputPort("estimated_position", len(robot_joint_names))
         self.DeclareVectorInputPort("measured_position", len(robot_joint_names))
         self.DeclareVectorInputPort("measurement_time", 1)
         self._state = self.DeclareDiscreteState(np.zeros(1 + 3 * m))
@@ -171,7 +176,9 @@ class CameraFrameServo(LeafSystem):
                               matrix[:3, 3])
         target = self._targets[max(self._config.target_index(t), 0)]
         V = cartesian_velocity_command(X_CE, target, self._gains)
-        J = self._jacobian(readings, q)
+        estimate = self.GetInputPort("estimated_position").Eval(context)
+        J = self._jacobian(estimate, q + estimate[self._arm_in_robot]
+                           - readings[self._arm_in_robot])
         result = DoDifferentialInverseKinematics(q, v_previous, V, J,
                                                  self._ik_parameters(q_start))
         if result.status != DifferentialInverseKinematicsStatus.kSolutionFound:
@@ -180,10 +187,10 @@ class CameraFrameServo(LeafSystem):
             return np.zeros(self._m)
         return np.asarray(result.joint_velocities, float).ravel()
 
-    def _jacobian(self, readings: np.ndarray, q_arm: np.ndarray) -> np.ndarray:
+    def _jacobian(self, estimate: np.ndarray, q_arm: np.ndarray) -> np.ndarray:
         """(6, m) Jacobian of E's spatial velocity in C (expressed in C) w.r.t. the arm
-        joints, nominal model, arm at ``q_arm`` and the other joints at their readings."""
-        robot_q = np.array(readings, float)
+        joints, nominal model, arm at ``q_arm`` and the other joints at ``estimate``."""
+        robot_q = np.array(estimate, float)
         robot_q[self._arm_in_robot] = q_arm
         q = self._plant.GetPositions(self._plant_context)
         q[self._robot_q_rows] = robot_q

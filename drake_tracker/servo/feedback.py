@@ -1,11 +1,12 @@
-"""The three pose feedbacks of the study, each an ``X_CE`` port for the controller.
+"""The three feedbacks of the study: an ``X_CE`` port and a joint-angle port each.
 
 * ``encoders`` (a): forward kinematics of the raw encoder readings on the nominal robot,
-  in the NOMINAL camera frame (:class:`EncoderKinematicsPose`): what a robot without the
-  tracker knows;
-* ``tracker`` (b): drake_tracker's ``X_CE`` (the hand in the ESTIMATED camera frame),
-  added with ``AddTracker`` on the world's encoders and depth camera, in the same Diagram;
-* ``truth`` (c): the hand in the TRUE camera frame, the ideal.
+  in the NOMINAL camera frame (:class:`EncoderKinematicsPose`), and the readings: what a
+  robot without the tracker knows;
+* ``tracker`` (b): drake_tracker's ``X_CE`` (the hand in the ESTIMATED camera frame) and
+  its ``estimated_position`` (robot joints), added with ``AddTracker`` on the world's
+  encoders and depth camera, in the same Diagram;
+* ``truth`` (c): the hand in the TRUE camera frame and the true angles, the ideal.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, OutputPort
+from pydrake.systems.primitives import MatrixGain
 
 from drake_tracker.params import TrackerParams
 from drake_tracker.robot import RobotConfig, add_robot
@@ -62,17 +64,18 @@ class EncoderKinematicsPose(LeafSystem):
 
 def AddFeedback(builder: DiagramBuilder, world: ServoWorld, feedback: str,
                 params: TrackerParams | None = None
-                ) -> tuple[OutputPort, TrackerSystems | None]:
-    """The ``X_CE`` port of ``feedback`` (one of ``FEEDBACKS``), and the tracker's
-    systems when it is ``tracker`` (which needs the world's depth camera)."""
+                ) -> tuple[OutputPort, OutputPort, TrackerSystems | None]:
+    """The ``X_CE`` port and the robot joints' angle port (``robot_joint_names`` order)
+    of ``feedback`` (one of ``FEEDBACKS``), and the tracker's systems when it is
+    ``tracker`` (which needs the world's depth camera)."""
     require_one_of(feedback, FEEDBACKS, "feedback")
     if feedback == "truth":
-        return world.ports["true_X_CE"], None
+        return world.ports["true_X_CE"], world.ports["true_position"], None
     if feedback == "encoders":
         fk = builder.AddNamedSystem("encoders_X_CE", EncoderKinematicsPose(
             world.robot_config, world.robot_joint_names))
         builder.Connect(world.ports["measured_position"], fk.get_input_port(0))
-        return fk.GetOutputPort("X_CE"), None
+        return fk.GetOutputPort("X_CE"), world.ports["measured_position"], None
     if "depth_frame" not in world.ports:
         raise ValueError("feedback 'tracker' needs the world's depth camera "
                          "(AddServoWorld(..., with_camera=True))")
@@ -80,4 +83,12 @@ def AddFeedback(builder: DiagramBuilder, world: ServoWorld, feedback: str,
                          params or TrackerParams(), world.ports["measured_position"],
                          world.ports["measurement_time"], world.ports["depth_frame"],
                          world.encoder_period_s)
-    return tracker.port("X_CE"), tracker
+    # The tracker estimates every model joint (the virtual camera joints too): keep the
+    # robot's, in robot_joint_names order.
+    names = world.model.joint_names
+    select = np.zeros((len(world.robot_joint_names), len(names)))
+    for row, name in enumerate(world.robot_joint_names):
+        select[row, names.index(name)] = 1.0
+    robot_joints = builder.AddNamedSystem("tracker_robot_joints", MatrixGain(select))
+    builder.Connect(tracker.port("estimated_position"), robot_joints.get_input_port())
+    return tracker.port("X_CE"), robot_joints.get_output_port(), tracker

@@ -65,10 +65,11 @@ def build_servo_diagram(config: ServoStudyConfig, feedback: str,
     builder = DiagramBuilder()
     world = AddServoWorld(builder, scenario, config.gains.joint_servo_frequency_rad_per_s,
                           with_camera=feedback == "tracker")
-    X_CE, tracker = AddFeedback(builder, world, feedback, params)
+    X_CE, joints, tracker = AddFeedback(builder, world, feedback, params)
     controller = builder.AddNamedSystem("servo_controller", CameraFrameServo(
         world.robot_config, world.robot_joint_names, world.arm_joint_names, config))
     builder.Connect(X_CE, controller.GetInputPort("X_CE"))
+    builder.Connect(joints, controller.GetInputPort("estimated_position"))
     builder.Connect(world.ports["measured_position"],
                     controller.GetInputPort("measured_position"))
     builder.Connect(world.ports["measurement_time"],
