@@ -3,6 +3,7 @@ stamp, a clock that steps back, a camera counter that restarts, an image out of 
 a burst of non-finite readings, each in the offline tracker and in the Diagram."""
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -256,6 +257,41 @@ def test_diagram_survives_glitch_step_restart_and_order_like_the_offline_tracker
     arrivals[4] = arrivals[5] + 2 * H  # image 4 arrives after image 5
     run = _with_arrivals(run, arrivals)
     p = small_params()
+    offline, applied = feed(Tracker(apollo, run.camera_intrinsics, p), run, stamps=stamps,
+                            sequences=sequences)
+    assert all(applied.values())
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        diagram, images_applied = simulate(apollo, run, p, stamps, sequences)
+    assert "restarted" in caplog.text and caplog.text.count("re-anchored") == 1
+    assert "far in the future" in caplog.text
+    assert_same_when_settled(run, diagram, offline)
+    assert images_applied == len(applied)
+
+
+def test_diagram_nan_burst_gives_one_warning_and_skips_the_image_inside(apollo, run, caplog):
+    """Finding 7 in the Diagram: a 0.15 s burst of NaN readings gave a warning per reading
+    per system, and an image inside it was applied with a 6.84 rad prior."""
+    burst = run.readings_rad.copy()
+    burst[(run.reading_times_s >= 0.15) & (run.reading_times_s < 0.3), 1] = np.nan
+    run = replace(run, readings_rad=burst)
+    p = small_params()
+    offline, applied = feed(Tracker(apollo, run.camera_intrinsics, p), run)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        diagram, images_applied = simulate(apollo, run, p)
+    warnings = [r.getMessage() for r in caplog.records]
+    assert sum("not finite" in w for w in warnings) == 1
+    assert sum("gap of the joint readings" in w for w in warnings) >= 1
+    assert images_applied == sum(applied.values()) < len(applied)
+    assert_same_when_settled(run, diagram, offline)
+
+
+def simulate(apollo, run, p, stamps=None, sequences=None):
+    """The Diagram on ``run`` (with faulty stamps or sequence numbers): the estimate
+    right after each reading's bank update, and the number of images applied."""
+    stamps = run.reading_times_s if stamps is None else stamps
+    sequences = np.arange(len(run.image_capture_times_s)) if sequences is None else sequences
     builder = DiagramBuilder()
     source = builder.AddSystem(FaultySource(run, stamps, sequences))
     tracker = AddTracker(builder, apollo, run.camera_intrinsics, p,
@@ -263,29 +299,26 @@ def test_diagram_survives_glitch_step_restart_and_order_like_the_offline_tracker
                          source.GetOutputPort("measurement_time"),
                          source.GetOutputPort("depth_frame"), encoder_period_s=H)
     simulator = Simulator(builder.Build())
-    sample_times = run.reading_times_s + 0.6 * H
-    offline, applied = feed(Tracker(apollo, run.camera_intrinsics, p), run, stamps=stamps,
-                            sequences=sequences, sample_times=sample_times)
-    assert all(applied.values())
-    caplog.clear()
     context = simulator.get_mutable_context()
     bank_context = tracker.kalman_bank.GetMyContextFromRoot(context)
-    with caplog.at_level(logging.WARNING):
-        diagram = []
-        for t in sample_times:
-            simulator.AdvanceTo(t)
-            diagram.append(tracker.port("estimated_position").Eval(bank_context).copy())
-    assert "restarted" in caplog.text and caplog.text.count("re-anchored") == 1
-    assert "far in the future" in caplog.text
+    estimates = []
+    for t in run.reading_times_s + 0.6 * H:
+        simulator.AdvanceTo(t)
+        estimates.append(tracker.port("estimated_position").Eval(bank_context).copy())
+    cpf = tracker.image_update.GetMyContextFromRoot(context).get_abstract_state(0)
+    return estimates, cpf.get_value().images_applied
+
+
+def assert_same_when_settled(run, diagram, offline):
+    """The Diagram applies an image at the first CPF tick after it arrives (<= h later),
+    the offline tracker at once: compare where no image arrived in the last 2 ticks."""
+    arrivals = run.image_arrival_times_s
     settled = np.array([not np.any((arrivals > t - 2.5 * H) & (arrivals <= t))
-                        for t in sample_times])
+                        for t in run.reading_times_s + 0.6 * H])
+    assert settled.sum() > 0.5 * len(settled)
     difference = np.abs(np.array(diagram)[settled] - np.array(offline)[settled])
     assert np.max(difference) <= 1e-9, np.max(difference)
-    cpf = tracker.image_update.GetMyContextFromRoot(context).get_abstract_state(0)
-    assert cpf.get_value().images_applied == len(applied)
 
 
 def _with_arrivals(run, arrivals):
-    from dataclasses import replace
-
     return replace(run, image_arrival_times_s=arrivals)
