@@ -10,6 +10,7 @@ recombination with p(b | a) (eq. 16) happens in the belief buffer.
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,6 +25,9 @@ from drake_tracker.core.likelihood import (
 )
 from drake_tracker.core.renderer import make_renderer
 
+#: How many per-update wall times ``StageTimes`` keeps.
+RECENT_UPDATES = 10_000
+
 
 @dataclass
 class StageTimes:
@@ -34,7 +38,10 @@ class StageTimes:
     filter_s: float = 0.0
     evaluations: int = 0
     updates: int = 0
-    per_update: list[float] = field(default_factory=list)
+    #: Wall time of each of the latest ``RECENT_UPDATES`` updates (s): bounded, so a
+    #: tracker that runs for hours does not grow (issue 14, finding 10).
+    per_update: deque[float] = field(
+        default_factory=lambda: deque(maxlen=RECENT_UPDATES))
 
 
 def check_depth_image(depth: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
