@@ -2,13 +2,16 @@
 
 Events are fed in the order a live tracker receives them: each reading at its stamp,
 each image at its arrival time (readings stamped at or before an image's arrival come
-first). Estimates are sampled after the last reading at or before each ground-truth
-time.
+first). Bad samples are skipped with a warning that names their time, and the replay
+finishes: readings by the tracker's time-stamp policy (``core/timestamps.py``), images
+that raise (malformed, or not in metres) here. Estimates are sampled after the last
+reading at or before each ground-truth time.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,12 +20,15 @@ import numpy as np
 
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.pipeline import PoseReadout, full_reading
+from drake_tracker.core.timestamps import RateLimitedWarning
 from drake_tracker.metrics import format_report_table, method_report
 from drake_tracker.params import TrackerParams, load_tracker_params
 from drake_tracker.progress import count_bar
 from drake_tracker.recording import RecordedRun
 from drake_tracker.robot import RobotConfig, build_tracker_model, load_robot_config
 from drake_tracker.tracker import Tracker
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -71,6 +77,8 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None
     image_order = np.argsort(run.image_arrival_times_s, kind="stable")
     next_image = 0
     next_sample = 0
+    skipped_images = 0
+    warnings = RateLimitedWarning(log)
     t_start = time.perf_counter()
     bar = count_bar(len(image_order), "image", "tracking", enabled=progress)
 
@@ -88,9 +96,14 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None
                and run.image_arrival_times_s[image_order[next_image]] < t):
             i = image_order[next_image]
             sample_until(run.image_arrival_times_s[i])
-            tracker.add_image(DepthFrame(float(run.image_capture_times_s[i]),
-                                         float(run.image_arrival_times_s[i]),
-                                         run.depth_images_m[i], int(i)))
+            try:
+                tracker.add_image(DepthFrame(float(run.image_capture_times_s[i]),
+                                             float(run.image_arrival_times_s[i]),
+                                             run.depth_images_m[i], int(i)))
+            except ValueError as err:
+                skipped_images += 1
+                warnings.warn("unusable images", f"image {i} captured at "
+                              f"{run.image_capture_times_s[i]:.4f} s skipped: {err}")
             next_image += 1
             bar.update(1)
         sample_until(t)
@@ -102,7 +115,7 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None
         times_s=np.asarray(times), positions=out_q, position_variances=out_var, biases=out_b,
         camera_offsets=out_q[:, virtual], X_CE=out_X, joint_names=list(model.joint_names),
         num_images_applied=tracker.num_images_applied,
-        num_images_skipped=tracker.num_images_skipped,
+        num_images_skipped=tracker.num_images_skipped + skipped_images,
         image_update_s=list(tracker.images.update.times.per_update) if tracker.images else [],
         wall_time_s=time.perf_counter() - t_start,
     )

@@ -21,6 +21,7 @@ import numpy as np
 from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
+from drake_tracker.core.depth_units import check_depth_units
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import TrackerHealth, next_health
 from drake_tracker.core.pipeline import (
@@ -107,13 +108,17 @@ class Tracker:
     def add_image(self, frame: DepthFrame) -> bool:
         """A depth image (full resolution of ``camera``); True when it was applied.
 
-        Images before the first reading, older than the buffer horizon, from the future,
-        not due yet (``min_image_interval_s``) or without a valid pixel are skipped, with
-        a logged warning for the first three. A malformed image raises ValueError.
+        Images before the first reading, with a stamp the time-stamp policy rejects
+        (``core/timestamps.py``), older than the buffer horizon, from the future, in a gap
+        of the readings, not due yet (``min_image_interval_s``) or without a valid pixel
+        are skipped, with a rate-limited warning for all but the not-due ones. A
+        malformed image, or one not in metres (``core/depth_units.py``), raises
+        ValueError.
         """
         if self.images is None or frame.is_empty:
             return False
         self.images.update.prepare(frame.depth_m)  # validates before anything changes
+        check_depth_units(frame.depth_m)
         if self.buffer is None:
             return self._skip(frame, "no joint reading yet", "images before a reading")
         decision = self.image_clock.check(self.images.image_time(frame))
@@ -133,7 +138,8 @@ class Tracker:
             return self._skip(frame, problem, problem_kind(problem))
         anchor = self.buffer.image_anchor(t)
         outcome = self.images.observe(
-            frame, anchor.prior, jump_window_s(t, self.last_applied_image_s, self.health))
+            frame, anchor.prior, jump_window_s(t, self.last_applied_image_s, self.health),
+            self.health.acquired)
         if t >= self.last_applied_image_s:  # an out-of-order image does not pace the rest
             self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
         self.last_result = outcome.result

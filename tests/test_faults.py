@@ -1,7 +1,25 @@
 """Issue 14's remaining faults: bounded timing records, depth images in the wrong units or
 without a valid pixel, and replays of recordings with bad samples."""
 
+import logging
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from drake_tracker.core.belief_buffer import ImageAnchor
+from drake_tracker.core.depth_units import depth_units_problem
+from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.image_update import RECENT_UPDATES, StageTimes
+from drake_tracker.core.pipeline import make_bank_and_prior
+from drake_tracker.offline import replay_run
+from drake_tracker.params import TrackerParams
+from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.synthetic import synthetic_run
+from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
+from drake_tracker.systems.messages import ImagePrior
+from drake_tracker.tracker import Tracker
 
 
 def test_the_per_update_timing_record_is_bounded():
@@ -11,3 +29,94 @@ def test_the_per_update_timing_record_is_bounded():
         times.per_update.append(float(k))
     assert len(times.per_update) == RECENT_UPDATES
     assert times.per_update[-1] == RECENT_UPDATES + 499  # the latest are kept
+
+
+# ----------------------------------------------------------------- depth images
+@pytest.fixture(scope="module")
+def apollo():
+    return build_tracker_model(robot_preset("apollo"))
+
+
+@pytest.fixture(scope="module")
+def run(apollo):
+    return synthetic_run(apollo, duration_s=0.3, encoder_rate_hz=200.0, seed=3)
+
+
+def small_params() -> TrackerParams:
+    p = TrackerParams()
+    p.image.num_particles = 20
+    p.image.annealing_betas = [0.1, 1.0]
+    p.image.min_image_interval_s = 0.0
+    return p
+
+
+def started_tracker(apollo, run) -> Tracker:
+    tracker = Tracker(apollo, run.camera_intrinsics, small_params())
+    for t, reading in zip(run.reading_times_s, run.readings_rad, strict=True):
+        tracker.add_reading(t, reading)
+    return tracker
+
+
+def test_a_millimetre_or_negative_image_is_a_clear_error(apollo, run):
+    """Finding 5: a float image in millimetres was silently useless (every pixel beyond
+    the likelihood's range); a negative one was silently used."""
+    tracker = started_tracker(apollo, run)
+    metres = run.depth_images_m[3]
+    assert depth_units_problem(metres) is None
+    before = tracker.estimate().positions.copy()
+    with pytest.raises(ValueError, match="millimetres"):
+        tracker.add_image(DepthFrame(0.1, 0.15, metres * 1000.0, 3))
+    negative = metres.copy()
+    negative[10, 10] = -0.5
+    with pytest.raises(ValueError, match="negative depth"):
+        tracker.add_image(DepthFrame(0.1, 0.15, negative, 3))
+    np.testing.assert_array_equal(tracker.estimate().positions, before)
+    assert tracker.add_image(DepthFrame(0.1, 0.15, metres, 3))
+
+
+@pytest.mark.parametrize("fault", ["all zero", "all NaN", "NaN stamp"])
+def test_images_without_a_valid_pixel_or_stamp_are_skipped_with_a_warning(
+        apollo, run, caplog, fault):
+    tracker = started_tracker(apollo, run)
+    image = {"all zero": np.zeros_like(run.depth_images_m[3]),
+             "all NaN": np.full_like(run.depth_images_m[3], np.nan)}.get(
+                 fault, run.depth_images_m[3])
+    stamp = np.nan if fault == "NaN stamp" else 0.1
+    before = tracker.estimate().positions.copy()
+    with caplog.at_level(logging.WARNING):
+        assert not tracker.add_image(DepthFrame(stamp, 0.15, image, 3))
+    assert "image 3 skipped" in caplog.text
+    assert ("not finite" if fault == "NaN stamp" else "no valid depth pixel") in caplog.text
+    np.testing.assert_array_equal(tracker.estimate().positions, before)
+
+
+def test_cpf_system_skips_a_millimetre_image_with_a_warning(apollo, run, caplog):
+    """Inside a Diagram a bad image is a rate-limited warning, never an exception."""
+    p = small_params()
+    system = CpfImageUpdateSystem(apollo, run.camera_intrinsics, p, period_s=0.01)
+    context = system.CreateDefaultContext()
+    _, belief = make_bank_and_prior(apollo, p, run.readings_rad[0])
+    anchor = ImageAnchor(0.0, 0.0, belief, np.zeros(apollo.num_joints))
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(0, 0.0, anchor, ""))
+    system.GetInputPort("depth_frame").FixValue(
+        context, DepthFrame(0.0, 0.05, run.depth_images_m[0] * 1000.0, 0))
+    with caplog.at_level(logging.WARNING):
+        Simulator(system, context).AdvanceTo(0.015)
+    assert "image 0 skipped" in caplog.text and "millimetres" in caplog.text
+    assert system.GetOutputPort("image_observation").Eval(context).id == 0
+
+
+# ----------------------------------------------------------------- replays
+def test_a_replay_skips_bad_samples_with_their_time_and_finishes(apollo, run, caplog):
+    """Finding 8: one NaN reading aborted the whole replay, with no time stamp given."""
+    readings = run.readings_rad.copy()
+    readings[21, 2] = np.nan
+    images = run.depth_images_m.copy()
+    images[4] *= 1000.0
+    bad = replace(run, readings_rad=readings, depth_images_m=images)
+    with caplog.at_level(logging.WARNING):
+        result = replay_run(bad, small_params(), apollo)
+    assert f"{run.reading_times_s[21]:.4f} s is not finite" in caplog.text
+    assert f"image 4 captured at {run.image_capture_times_s[4]:.4f} s skipped" in caplog.text
+    assert result.num_images_applied == len(run.image_capture_times_s) - 1
+    assert np.all(np.isfinite(result.positions[-5:]))

@@ -53,6 +53,25 @@ def test_health_states_follow_consecutive_images():
     assert states == ["U", "T", "U", "U", "L", "L", "L", "T", "U", "U"]
 
 
+def test_acquired_while_a_recent_image_confirmed_the_estimate():
+    p = HealthParams(min_robot_pixels=10, recovered_after_images=1, reacquire_after_s=1.0)
+    good = ImageConsistency(0.0, 100, 0.9, 0.02)
+    h = TrackerHealth()
+    assert not h.acquired
+    h = next_health(h, ImageConsistency(0.0, 3, 0.0, 0.0), p)  # nothing seen yet
+    assert not h.acquired
+    h = next_health(h, good, p)
+    assert h.acquired and h.confirmed_s == 0.0
+    # Out of view: still held 1 s after the last confirmation, then a new search.
+    for t, acquired in ((0.5, True), (1.0, True), (1.1, False), (3.0, False)):
+        h = next_health(h, ImageConsistency(t, 0, 0.0, 0.0), p)
+        assert (h.state, h.acquired) == (HealthState.UNCERTAIN, acquired), t
+    h = next_health(h, ImageConsistency(3.1, 100, 0.9, 0.02), p)
+    assert h.acquired and h.confirmed_s == 3.1
+    with pytest.raises(ValueError, match="reacquire_after_s"):
+        HealthParams(reacquire_after_s=0.0).validate()
+
+
 def _track_step(apollo, run, params, step_s):
     tracker = Tracker(apollo, run.camera_intrinsics, params)
     images = np.argsort(run.image_arrival_times_s)
@@ -104,3 +123,25 @@ def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(apollo,
     params.kalman.robot_joints.bias_jump_rate_per_s = 0.0
     errors, lost_at = _track_step(apollo, step_run, params, step_s=1.5)
     assert lost_at is not None and lost_at <= 2.5, lost_at
+
+
+def test_the_search_uses_acquisition_particles_until_the_arm_is_acquired(apollo, step_run):
+    params = TrackerParams()
+    params.image.num_particles, params.image.acquisition_num_particles = 20, 60
+    tracker = Tracker(apollo, step_run.camera_intrinsics, params)
+    per_particle = len(tracker.images.update.blocks) * len(params.image.annealing_betas)
+    images = np.argsort(step_run.image_arrival_times_s)
+    k, used = 0, []
+    for t, reading in zip(step_run.reading_times_s, step_run.readings_rad):
+        while k < len(images) and step_run.image_arrival_times_s[images[k]] <= t and len(used) < 8:
+            i = images[k]
+            acquired = tracker.health.acquired
+            if tracker.add_image(DepthFrame(float(step_run.image_capture_times_s[i]),
+                                            float(step_run.image_arrival_times_s[i]),
+                                            step_run.depth_images_m[i], int(i))):
+                used.append((acquired, tracker.last_result.num_evaluations // per_particle))
+            k += 1
+        tracker.add_reading(float(t), reading)
+    assert used[0] == (False, 60)
+    assert any(acquired for acquired, _ in used)
+    assert all(n == (20 if acquired else 60) for acquired, n in used)

@@ -117,18 +117,21 @@ class CpfImageUpdate:
 
     def __call__(self, prior: np.ndarray, observation: PreparedObservation,
                  rng: np.random.Generator, jump_probability: np.ndarray | None = None,
-                 jump_std: np.ndarray | None = None) -> CPFResult | None:
+                 jump_std: np.ndarray | None = None, num_particles: int | None = None
+                 ) -> CPFResult | None:
         """Angle marginals after the image, or None for an image with no valid pixel.
 
         ``jump_probability``/``jump_std`` (n,) let the prior of each angle admit a jump
-        (a bias step since the previous image; see ``core/cpf.py``)."""
+        (a bias step since the previous image; see ``core/cpf.py``); ``num_particles``
+        overrides the particles per block for this image."""
         if observation.num_valid == 0:
             return None
         t0 = time.perf_counter()
         eval_before = self.times.render_s + self.times.likelihood_s
         result = annealed_coordinate_particle_filter(
             prior[MEAN_A], np.sqrt(np.maximum(prior[VAR_A], 0.0)), self.blocks,
-            self.num_particles, lambda q: self.log_likelihood(q, observation), rng,
+            num_particles or self.num_particles,
+            lambda q: self.log_likelihood(q, observation), rng,
             self.max_kl, self.annealing_betas, jump_probability=jump_probability,
             jump_std=jump_std)
         total = time.perf_counter() - t0

@@ -24,6 +24,7 @@ import numpy as np
 from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
+from drake_tracker.core.depth_units import check_depth_units
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import ImageConsistency, TrackerHealth, image_consistency
 from drake_tracker.core.image_update import CpfImageUpdate
@@ -174,12 +175,14 @@ class ImageProcessor:
         window = min(max(float(elapsed_s), 0.0), MAX_JUMP_WINDOW_S)
         return -np.expm1(-self._jump_rate * window)
 
-    def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf
-                ) -> ImageOutcome:
+    def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf,
+                acquired: bool = True) -> ImageOutcome:
         """The image's observation relative to ``prior`` (None if it has no valid pixel),
         and its consistency with the estimate; ``elapsed_s`` is the time since the
-        previous applied image."""
+        previous applied image; until the arm is ``acquired`` (``TrackerHealth``), the
+        update searches with ``image.acquisition_num_particles``."""
         observation = self.update.prepare(frame.depth_m)
+        check_depth_units(frame.depth_m)  # a millimetre image is an error, not a blank
         if observation.num_valid == 0:
             return ImageOutcome(None, None, None)
         # The image against the belief before it: the predictive check of the health
@@ -199,7 +202,8 @@ class ImageProcessor:
                 observation, pixel_occlusion(observation, rendered, fraction))
         result = self.update(prior, observation,
                              image_rng(self.params.image.seed, frame.sequence),
-                             self.jump_probability(elapsed_s), self._jump_std)
+                             self.jump_probability(elapsed_s), self._jump_std,
+                             None if acquired else self.params.image.acquisition_num_particles)
         if result is None:
             return ImageOutcome(None, None, None)
         # A degenerate particle set would claim certainty; floor the posterior variance

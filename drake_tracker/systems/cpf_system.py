@@ -119,7 +119,8 @@ class CpfImageUpdateSystem(LeafSystem):
             s.next_image_due_s = self.processor.next_due(t, s.next_image_due_s)
         try:
             window = jump_window_s(t, s.last_applied_image_s, s.health)
-            outcome = self.processor.observe(frame, prior.anchor.prior, window)
+            outcome = self.processor.observe(frame, prior.anchor.prior, window,
+                                             s.health.acquired)
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(frame, f"{type(err).__name__}: {err}")
         if outcome.observation is None:
