@@ -1,4 +1,4 @@
-"""Pose errors and percentile summaries, as in the paper's evaluation (SPEC §5)."""
+"""Pose errors and percentile summaries, as in the paper's evaluation (README, "Evaluation")."""
 
 from __future__ import annotations
 

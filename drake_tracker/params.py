@@ -2,7 +2,7 @@
 
 Units are in the field names: ``_rad`` (rad, or m for the prismatic virtual joints),
 ``_per_sqrt_s`` (standard deviation growth per square root of a second), ``_per_s``,
-``_m``, ``_s``, ``_px``. The paper's models (SPEC §2) are written per second; dbrt's
+``_m``, ``_s``, ``_px``. The paper's models (docs/method.md §2) are written per second; dbrt's
 per-message values were converted and then chosen by measurement (see ``docs/``).
 
 Example YAML (every field optional)::
@@ -33,7 +33,7 @@ BLOCK_MODES = ("per-joint", "arm-camera", "single", "camera")
 
 @dataclass
 class JointNoise:
-    """Noise model of one joint's (angle, bias) Kalman filter (SPEC §2, eqs. 3-5)."""
+    """Noise model of one joint's (angle, bias) Kalman filter (docs/method.md §2-3, eqs. 3-5)."""
 
     #: σq: encoder white noise (rad).
     encoder_noise_std_rad: float = 2e-4
@@ -116,7 +116,7 @@ class ImageParams:
     #: Likelihood exponents of successive CPF sweeps per image, increasing to 1; [1.0]
     #: is the paper's single sweep. Evaluations per image = particles x blocks x layers.
     annealing_betas: list[float] = field(default_factory=lambda: [0.003, 0.03, 0.3, 1.0])
-    #: Images are subsampled to about this width (px) before the update (SPEC §4).
+    #: Images are subsampled to about this width (px) before the update (docs/method.md §4).
     image_width_px: int = 80
     #: Subtracted from each image's capture stamp to get its time t' (s).
     image_time_offset_s: float = 0.0

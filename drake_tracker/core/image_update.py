@@ -1,7 +1,7 @@
 """One depth image's update of the joint angles: render, score, Coordinate Particle Filter.
 
 :class:`CpfImageUpdate` is built once per model and camera: it fixes the processing
-resolution (plain subsampling to about ``image_width_px``, SPEC §4), the renderer backend
+resolution (plain subsampling to about ``image_width_px``, docs/method.md §4), the renderer backend
 and the CPF blocks. Each call takes the prior belief at the image's time and a depth
 image, and returns the moment-matched angle marginals (eqs. 13-15); the Kalman bank's
 recombination with p(b | a) (eq. 16) happens in the belief buffer.

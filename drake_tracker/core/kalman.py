@@ -1,6 +1,6 @@
 """A bank of independent 2-state Kalman filters on (angle, bias), one per joint.
 
-Models (paper eqs. 3-5, SPEC §2), with Δ the time step in seconds:
+Models (paper eqs. 3-5, docs/method.md §2-3), with Δ the time step in seconds:
 
 * encoder:  ``q = a + b + N(0, σq²)``
 * angle:    ``a(t+Δ) = a(t) + N(0, Δ σa²)``

@@ -1,4 +1,4 @@
-"""The occlusion-robust depth-pixel likelihood (paper eqs. 1-2, SPEC §2).
+"""The occlusion-robust depth-pixel likelihood (paper eqs. 1-2, docs/method.md §2).
 
 For an observed depth ``z`` and the depth ``d`` the robot renders at that pixel:
 

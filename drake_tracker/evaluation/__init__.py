@@ -1,4 +1,4 @@
-"""``drake-tracker evaluate``: the paper's protocol (SPEC §5) on the simulated suite.
+"""``drake-tracker evaluate``: the paper's protocol (README, "Evaluation") on the simulated suite.
 
 Work is split into tasks, one per (sequence, bias variant, seed) (``tasks``): a task
 simulates its run, replays it through every method, and returns its errors sampled at
