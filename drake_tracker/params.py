@@ -216,6 +216,10 @@ def _check(cond: bool, where: str, value, why: str) -> None:
         raise ValueError(f"{where} = {value!r}: {why}")
 
 
+#: Largest standard deviation accepted (rad, rad/√s): above it variances overflow.
+MAX_STD = 1e6
+
+
 def validate_joint_noise(noise: JointNoise, where: str) -> None:
     for name in ("encoder_noise_std_rad", "angle_process_std_rad_per_sqrt_s",
                  "initial_angle_std_rad"):
@@ -231,6 +235,12 @@ def validate_joint_noise(noise: JointNoise, where: str) -> None:
         value = getattr(noise, name)
         _check(math.isfinite(value) and value >= 0, f"{where}.{name}", value,
                "must be finite and >= 0")
+    for name in ("encoder_noise_std_rad", "angle_process_std_rad_per_sqrt_s",
+                 "initial_angle_std_rad", "bias_process_std_rad_per_sqrt_s",
+                 "initial_bias_std_rad", "bias_jump_std_rad"):
+        value = getattr(noise, name)
+        _check(value < MAX_STD, f"{where}.{name}", value,
+               f"must be below {MAX_STD:g} (a larger one overflows the filter's variances)")
 
 
 def validate_tracker_params(params: TrackerParams) -> None:
@@ -267,6 +277,12 @@ def validate_tracker_params(params: TrackerParams) -> None:
            "need 0 < near_m < far_m")
     im.likelihood.validate()
     params.health.validate()
+    _check(im.seed >= 0 and int(im.seed) == im.seed, "image.seed", im.seed,
+           "must be an integer >= 0")
+    for name, value in params.initial_positions_rad.items():
+        _check(math.isfinite(value), f"initial_positions_rad[{name}]", value, "must be finite")
+    _check(math.isfinite(params.buffer_horizon_s), "buffer_horizon_s",
+           params.buffer_horizon_s, "must be finite (the buffer is pruned to it)")
     _check(params.buffer_horizon_s > 0, "buffer_horizon_s", params.buffer_horizon_s,
            "must be > 0")
     _check(math.isfinite(params.max_interpolation_gap_s)

@@ -31,6 +31,7 @@ from drake_tracker.core.pipeline import (
     estimate_from_belief,
     full_reading,
     jump_window_s,
+    make_bank_and_prior,
     new_belief_buffer,
     robot_joint_indices,
 )
@@ -62,6 +63,7 @@ class Tracker:
         self.camera = camera
         self.params = params if params is not None else TrackerParams()
         validate_tracker_params(self.params)
+        make_bank_and_prior(model, self.params, None)  # joint names checked now, not later
         self.readout = PoseReadout(model)
         self.images = ImageProcessor(model, camera, self.params) \
             if self.params.image.enabled else None

@@ -2,6 +2,7 @@
 without a valid pixel, and replays of recordings with bad samples."""
 
 import logging
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -14,7 +15,7 @@ from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.image_update import RECENT_UPDATES, StageTimes
 from drake_tracker.core.pipeline import make_bank_and_prior
 from drake_tracker.offline import replay_run
-from drake_tracker.params import TrackerParams
+from drake_tracker.params import TrackerParams, validate_tracker_params
 from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.synthetic import synthetic_run
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
@@ -120,3 +121,29 @@ def test_a_replay_skips_bad_samples_with_their_time_and_finishes(apollo, run, ca
     assert f"image 4 captured at {run.image_capture_times_s[4]:.4f} s skipped" in caplog.text
     assert result.num_images_applied == len(run.image_capture_times_s) - 1
     assert np.all(np.isfinite(result.positions[-5:]))
+
+
+# ----------------------------------------------------------------- parameters
+@pytest.mark.parametrize("field, setter", [
+    ("kalman.robot_joints.angle_process_std_rad_per_sqrt_s",
+     lambda p: setattr(p.kalman.robot_joints, "angle_process_std_rad_per_sqrt_s", 1e200)),
+    ("image.seed", lambda p: setattr(p.image, "seed", -1)),
+    ("initial_positions_rad[arm_joint_1]",
+     lambda p: p.initial_positions_rad.update(arm_joint_1=float("nan"))),
+    ("buffer_horizon_s", lambda p: setattr(p, "buffer_horizon_s", float("inf"))),
+])
+def test_parameters_that_would_fail_later_are_rejected_at_load_by_name(field, setter):
+    """Finding 6 (the part in params.py): these loaded, then failed at the first image or
+    silently disabled the buffer's pruning."""
+    p = TrackerParams()
+    setter(p)
+    with pytest.raises(ValueError, match=re.escape(field)):
+        validate_tracker_params(p)
+
+
+def test_unknown_joint_names_are_reported_when_the_tracker_is_built(apollo, run):
+    """Finding 9: reported at the first reading, not when the parameters were given."""
+    p = small_params()
+    p.initial_positions_rad["no_such_joint"] = 0.1
+    with pytest.raises(ValueError, match="no_such_joint"):
+        Tracker(apollo, run.camera_intrinsics, p)
