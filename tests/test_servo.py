@@ -66,3 +66,55 @@ def test_tracker_in_the_loop_is_close_to_the_ideal(final_errors_mm):
     bound_mm = max(3.0 * final_errors_mm["truth"], 5.0)
     assert final_errors_mm["tracker"] <= bound_mm, final_errors_mm
     assert np.isfinite(list(final_errors_mm.values())).all()
+
+
+# --- The building blocks, against independent references (fast) ---------------------
+
+
+def test_cartesian_law_points_at_the_target_and_is_capped():
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    from drake_tracker.servo.config import ServoGains
+    from drake_tracker.servo.controller import cartesian_velocity_command
+
+    gains = ServoGains(translation_gain_per_s=2.0, rotation_gain_per_s=2.0,
+                       max_speed_m_per_s=0.15, max_angular_speed_deg_per_s=30.0)
+    X_CE = RigidTransform(RollPitchYaw(0.1, -0.2, 0.3), [0.1, -0.1, 1.0])
+    assert np.allclose(cartesian_velocity_command(X_CE, X_CE, gains), 0.0)
+    # 2 cm off along x, 10 deg about z: v = 2/s * 2 cm, w = 2/s * 10 deg about z.
+    X_CT = RigidTransform(RollPitchYaw(0, 0, np.radians(10)).ToRotationMatrix()
+                          @ X_CE.rotation(), X_CE.translation() + [0.02, 0, 0])
+    V = cartesian_velocity_command(X_CE, X_CT, gains)
+    assert np.allclose(V[3:], [0.04, 0, 0])
+    assert np.allclose(V[:3], [0, 0, 2 * np.radians(10)])
+    # 50 cm away along y: the speed is capped at 0.15 m/s, the direction kept.
+    far = RigidTransform(X_CE.rotation(), X_CE.translation() + [0.0, 0.5, 0.0])
+    V = cartesian_velocity_command(X_CE, far, gains)
+    assert np.isclose(np.linalg.norm(V[3:]), 0.15) and V[4] > 0
+
+
+def test_settle_time_is_when_the_error_stays_below_the_threshold():
+    from drake_tracker.servo.outcomes import settle_time
+
+    t = np.arange(0.0, 3.0, 0.5)
+    assert settle_time(t, np.array([9, 4, 6, 4, 3, 2.0]), 0.0, 5.0) == 1.5
+    assert settle_time(t, np.array([9, 4, 6, 4, 3, 6.0]), 0.0, 5.0) is None
+    assert settle_time(t, np.full(6, 1.0), 1.0, 5.0) == 0.0
+
+
+def test_config_round_trips_and_names_a_bad_field(tmp_path):
+    from drake_tracker.servo.config import load_servo_config, servo_config_to_yaml
+
+    path = tmp_path / "servo.yaml"
+    path.write_text(servo_config_to_yaml(ServoStudyConfig()))
+    assert servo_config_to_yaml(load_servo_config(str(path))) == path.read_text()
+    path.write_text("targets:\n  - {xyz_m: [0, 0, 1], rpy_deg: [0, 0, 0], dwell_s: -1}\n")
+    with pytest.raises(ValueError, match=r"targets\[0\]\.dwell_s"):
+        load_servo_config(str(path))
+
+
+def test_cli_rejects_an_unknown_run(capsys):
+    from drake_tracker.cli import main
+
+    assert main(["servo", "--runs", "encoders,magic", "--no-meshcat"]) == 2
+    assert "magic" in capsys.readouterr().err
