@@ -114,6 +114,7 @@ def load_servo_config_arg(path: str | None, scenario: str | None = None):
     """The :class:`~drake_tracker.servo.config.ServoStudyConfig` of ``--config path``
     (default: the defaults), with ``--scenario`` over its ``scenario``; checked."""
     from drake_tracker.servo.config import load_servo_config, validate_servo_config
+    from drake_tracker.servo.study import servo_scenario
 
     if path and not Path(path).is_file():
         raise UsageError(f"servo config '{path}' does not exist ('drake-tracker servo "
@@ -124,6 +125,7 @@ def load_servo_config_arg(path: str | None, scenario: str | None = None):
             config.scenario = scenario_name(scenario)
             validate_servo_config(config)
         resolve_scenario(config.scenario)
+        servo_scenario(config)
     except ValueError as err:
         raise UsageError(f"servo config: {_one_line(err)}") from None
     return config

@@ -28,6 +28,7 @@ from drake_tracker.servo.controller import CameraFrameServo
 from drake_tracker.servo.feedback import AddFeedback
 from drake_tracker.servo.world import AddServoWorld, ServoWorld
 from drake_tracker.sim.config import Scenario
+from drake_tracker.sim.validation import require
 from drake_tracker.systems.add_tracker import TrackerSystems
 
 #: A hook that adds visualisation to a servo Diagram: (builder, world, feedback) -> None.
@@ -35,10 +36,14 @@ Visualize = Callable[[DiagramBuilder, ServoWorld, str], None]
 
 
 def servo_scenario(config: ServoStudyConfig) -> Scenario:
-    """The study's world: ``config.scenario`` loaded and checked, in dynamic mode."""
+    """The study's world: ``config.scenario`` loaded and checked, in dynamic mode (a world
+    robot that differs from the model, ``model_mismatch``, is not supported)."""
     from drake_tracker.sim.scenario import load_scenario
 
     scenario = load_scenario(config.scenario)
+    require(not scenario.model_mismatch.enabled, "scenario", config.scenario,
+            "its model_mismatch is not supported by the servo study (the world simulates "
+            "the nominal robot)")
     scenario.mode = "dynamic"
     return scenario
 

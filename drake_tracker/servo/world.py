@@ -11,6 +11,7 @@
   command, so the commanded arm angles are in encoder coordinates and the true angles
   end up at command - bias (modelled exactly: the encoders' noise and sampling are left
   out of the inner loop). The head and the virtual joints hold their home values;
+* the scenario's occluders (``drake_tracker.sim.occluders``), posed from the plant;
 * the :class:`~drake_tracker.sim.truth.TruthSystem`, the biased
   :class:`~drake_tracker.sim.encoders.BiasedEncoders` and, with ``with_camera``, the
   depth camera of ``drake_tracker.sim.depth_camera`` (only the tracker needs it).
@@ -42,14 +43,16 @@ from drake_tracker.robot import (
     add_virtual_camera_joints,
     build_tracker_model,
 )
-from drake_tracker.sim.config import Scenario
+from drake_tracker.sim.config import Scenario, scenario_occluders
 from drake_tracker.sim.depth_camera import AddDepthCamera, DepthCameraSystem, camera_intrinsics
 from drake_tracker.sim.encoders import BiasedEncoders
 from drake_tracker.sim.environment import add_environment
+from drake_tracker.sim.occluders import AddOccluders, OccluderMotion
 from drake_tracker.sim.profiles import robot_profile
 from drake_tracker.sim.reference import offset_gain_matrix, position_joint_names
 from drake_tracker.sim.trajectories import make_joint_trajectory
 from drake_tracker.sim.truth import TruthSystem
+from drake_tracker.sim.validation import require
 from drake_tracker.sim.world import resolved_biased_joints
 
 
@@ -151,6 +154,8 @@ def AddServoWorld(builder: DiagramBuilder, scenario: Scenario,
     """Adds the world of ``scenario`` (module doc). Connect the controller's arm command
     to ``ServoWorld.arm_command_input``."""
     config = scenario.resolved_robot_config()
+    require(not scenario.model_mismatch.enabled, "model_mismatch", scenario.model_mismatch,
+            "the servo world simulates the nominal robot; use a scenario without it")
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, scenario.time_step_s)
     plant.set_name(f"{name}_plant")
     scene_graph.set_name(f"{name}_scene_graph")
@@ -192,6 +197,9 @@ def AddServoWorld(builder: DiagramBuilder, scenario: Scenario,
                                    Demultiplexer([plant.num_positions(), nv]))
     builder.Connect(plant.get_state_output_port(), demux.get_input_port(0))
     positions = demux.get_output_port(0)
+    AddOccluders(builder, scene_graph,
+                 OccluderMotion(plant, scenario_occluders(scenario), instance, camera_frame,
+                                ee_frame), positions, name=f"{name}_occluders")
 
     truth = builder.AddNamedSystem(f"{name}_truth",
                                    TruthSystem(plant, robot_names, camera_frame, ee_frame))
