@@ -130,6 +130,9 @@ def _check_camera(c: CameraConfig) -> None:
     require(0 <= c.dropout_probability < 1, "camera.dropout_probability",
             c.dropout_probability, "must be in [0, 1)")
     require_positive(c.silhouette_threshold_m, "camera.silhouette_threshold_m")
+    require(isinstance(c.render_stride, int) and not isinstance(c.render_stride, bool)
+            and 1 <= c.render_stride <= min(c.width, c.height), "camera.render_stride",
+            c.render_stride, "must be an integer from 1 to the image's smaller side")
     require_length(c.offset, 6, "camera.offset", "numbers [x y z rx ry rz]")
     for joint, gains in c.offset_gain_per_rad.items():
         require_length(gains, 6, f"camera.offset_gain_per_rad[{joint}]")

@@ -143,6 +143,12 @@ class CameraConfig:
     dropout_probability: float = 0.005
     #: Pixels next to a depth jump larger than this are invalid (silhouettes) (m).
     silhouette_threshold_m: float = 0.05
+    #: Render only every ``render_stride``-th pixel of the ``width`` x ``height`` camera,
+    #: from pixel (0, 0): the delivered images are ``core.camera.subsample(full_image,
+    #: render_stride)``, with the same pixel centres and intrinsics
+    #: ``CameraIntrinsics.subsampled(render_stride)`` (``sim.depth_camera``). 1: full
+    #: resolution. The demo sets it to the tracker's stride (it renders what is read).
+    render_stride: int = 1
     #: The TRUE camera pose relative to the nominal one: [x, y, z] (m) then
     #: [rx, ry, rz] (rad), the six virtual joints' values.
     offset: list[float] = field(

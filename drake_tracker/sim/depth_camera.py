@@ -10,11 +10,19 @@ instead. Python systems cannot schedule their own next update, so the schedule i
 once for a cycle of about ``SCHEDULE_CYCLE_S`` and repeats (one periodic event per frame
 slot of the cycle, and one per arrival).
 
+With ``camera.render_stride`` s > 1 the camera renders only what the subsampled image
+needs: its pixels (s*i, s*j) of the full-resolution camera and their four
+full-resolution neighbours (the silhouettes below need them), as two renders, the
+kept rows at full width and the kept columns at full height (``grid_intrinsics``; a
+quarter of the full image's pixels at s = 8). The delivered image is exactly
+``core.camera.subsample`` of the full-resolution image, with the same silhouettes and
+noise of the same law, drawn for the kept pixels only.
+
 Per captured image ``k``:
 
 * pixels where nothing was hit (too far) or closer than the near plane become NaN;
-* silhouettes: a pixel whose 4-neighbour depth differs by more than
-  ``silhouette_threshold_m`` (or whose neighbour is invalid) becomes NaN, on both
+* silhouettes: a pixel whose 4-neighbour depth (at full resolution) differs by more
+  than ``silhouette_threshold_m`` (or whose neighbour is invalid) becomes NaN, on both
   sides of the edge;
 * depth-dependent Gaussian noise ``sigma(z) = noise_sigma0_m + noise_k_per_m * z^2`` (m);
 * each pixel drops out (NaN) with probability ``dropout_probability``.
@@ -26,6 +34,8 @@ copied or reset. The image is delivered as a :class:`DepthFrame` at
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -81,6 +91,24 @@ def camera_intrinsics(config: CameraConfig) -> CameraIntrinsics:
     return CameraIntrinsics.from_fov(config.width, config.height, np.radians(config.fov_y_deg))
 
 
+def grid_intrinsics(camera: CameraIntrinsics, stride_u: int, stride_v: int
+                    ) -> CameraIntrinsics:
+    """Intrinsics of the image of every ``stride_u``-th column and ``stride_v``-th row of
+    ``camera``'s image, from pixel (0, 0): its pixel (i, j) looks along the ray of
+    ``camera``'s pixel (stride_u*i, stride_v*j) (``CameraIntrinsics.subsampled`` when
+    both strides are equal)."""
+    if stride_u == stride_v:
+        return camera.subsampled(stride_u)
+    u, v = camera.subsampled(stride_u), camera.subsampled(stride_v)
+    return dataclasses.replace(u, height=v.height, fy=v.fy, cy=v.cy)
+
+
+def rendered_intrinsics(config: CameraConfig) -> CameraIntrinsics:
+    """Intrinsics of the delivered images: the full-resolution camera subsampled by
+    ``config.render_stride``."""
+    return camera_intrinsics(config).subsampled(config.render_stride)
+
+
 def ensure_vtk_renderer(scene_graph: SceneGraph, name: str = RENDERER_NAME) -> str:
     """Adds a headless RenderEngineVtk called ``name`` to ``scene_graph`` unless present."""
     if not scene_graph.HasRenderer(name):
@@ -88,10 +116,13 @@ def ensure_vtk_renderer(scene_graph: SceneGraph, name: str = RENDERER_NAME) -> s
     return name
 
 
-def depth_render_camera(config: CameraConfig, renderer_name: str = RENDERER_NAME
-                        ) -> DepthRenderCamera:
-    """Drake's depth camera for ``config``: clipping and depth range [near_m, far_m]."""
-    core = RenderCameraCore(renderer_name, camera_intrinsics(config).to_camera_info(),
+def depth_render_camera(config: CameraConfig, renderer_name: str = RENDERER_NAME,
+                        strides: tuple[int, int] = (1, 1)) -> DepthRenderCamera:
+    """Drake's depth camera for ``config``, full resolution or, with ``strides = (su,
+    sv)``, its every su-th column and sv-th row (``grid_intrinsics``): clipping and depth
+    range [near_m, far_m]."""
+    intrinsics = grid_intrinsics(camera_intrinsics(config), *strides)
+    core = RenderCameraCore(renderer_name, intrinsics.to_camera_info(),
                             ClippingRange(config.near_m, config.far_m), RigidTransform())
     return DepthRenderCamera(core, DepthRange(config.near_m, config.far_m))
 
@@ -107,23 +138,48 @@ def silhouette_mask(depth_m: np.ndarray, threshold_m: float) -> np.ndarray:
     """True where a 4-neighbour's depth differs by more than ``threshold_m`` or is NaN
     while the pixel is valid (both sides of a depth edge are marked)."""
     z = np.asarray(depth_m)
-    mask = np.zeros(z.shape, bool)
-    with np.errstate(invalid="ignore"):
-        rows = ~(np.abs(z[1:, :] - z[:-1, :]) <= threshold_m)  # NaN counts as a jump
-        cols = ~(np.abs(z[:, 1:] - z[:, :-1]) <= threshold_m)
-    mask[1:, :] |= rows
-    mask[:-1, :] |= rows
-    mask[:, 1:] |= cols
-    mask[:, :-1] |= cols
+    mask = jumps_along(z, 0, threshold_m) | jumps_along(z, 1, threshold_m)
     return mask & np.isfinite(z)
 
 
-def corrupt_depth(clean_m: np.ndarray, config: CameraConfig, seed: int, index: int
-                  ) -> np.ndarray:
+def jumps_along(depth_m: np.ndarray, axis: int, threshold_m: float) -> np.ndarray:
+    """True where the depth of a neighbour along ``axis`` (0: the pixel above or below,
+    1: left or right) differs by more than ``threshold_m`` or either is NaN."""
+    z = np.moveaxis(np.asarray(depth_m), axis, 0)
+    mask = np.zeros(z.shape, bool)
+    with np.errstate(invalid="ignore"):
+        jump = ~(np.abs(z[1:] - z[:-1]) <= threshold_m)  # NaN counts as a jump
+    mask[1:] |= jump
+    mask[:-1] |= jump
+    return np.moveaxis(mask, 0, axis)
+
+
+def strided_silhouette_mask(rows_m: np.ndarray, columns_m: np.ndarray, stride: int,
+                            threshold_m: float) -> np.ndarray:
+    """:func:`silhouette_mask` of the full-resolution image at the pixels that
+    ``subsample(., stride)`` keeps, from ``rows_m`` (the kept rows at full width) and
+    ``columns_m`` (the kept columns at full height), both through
+    :func:`invalidate_no_hits`."""
+    across = jumps_along(rows_m, 1, threshold_m)[:, ::stride]
+    down = jumps_along(columns_m, 0, threshold_m)[::stride, :]
+    return (across | down) & np.isfinite(rows_m[:, ::stride])
+
+
+def corrupt_depth(clean_m: np.ndarray, config: CameraConfig, seed: int, index: int,
+                  columns_m: np.ndarray | None = None) -> np.ndarray:
     """The sensor model applied to a noise-free depth render (m); returns float32, NaN =
-    invalid. Depends only on (clean image, config, seed, index)."""
+    invalid. Depends only on (clean image(s), config, seed, index). With
+    ``render_stride`` s > 1, ``clean_m`` holds the kept rows at full width and
+    ``columns_m`` the kept columns at full height (``DepthCameraSystem``), and the result
+    is the subsampled image."""
     z = invalidate_no_hits(clean_m, config.near_m, config.far_m)
-    silhouettes = silhouette_mask(z, config.silhouette_threshold_m)
+    if columns_m is None:
+        silhouettes = silhouette_mask(z, config.silhouette_threshold_m)
+    else:
+        columns = invalidate_no_hits(columns_m, config.near_m, config.far_m)
+        silhouettes = strided_silhouette_mask(z, columns, config.render_stride,
+                                              config.silhouette_threshold_m)
+        z = z[:, ::config.render_stride]
     rng = counter_generator(seed, index, CAMERA_STREAM)
     noise = rng.standard_normal(z.shape, dtype=np.float32)
     dropout = rng.random(z.shape, dtype=np.float32) < config.dropout_probability
@@ -146,9 +202,13 @@ class DepthCameraSystem(LeafSystem):
 
     ``depth_image_32f`` is the noise-free render (``ImageDepth32F``, e.g. RgbdSensor's
     ``depth_image_32f``); it is evaluated only at capture instants (``capture_schedule``).
+    With ``render_stride`` s > 1 it renders the kept rows at full width
+    (``depth_render_camera(config, strides=(1, s))``), and a second input,
+    ``depth_image_32f_columns``, the kept columns at full height (strides (s, 1)).
     ``depth_frame`` is the latest image that has *arrived* (``capture + delay_s``) as a
-    :class:`DepthFrame` (full resolution, float32 m, NaN = invalid), and
-    ``DepthFrame.empty()`` before the first arrival; it changes only at arrivals.
+    :class:`DepthFrame` (float32 m, NaN = invalid; full resolution, or subsampled by
+    ``render_stride``: ``intrinsics``), and ``DepthFrame.empty()`` before the first
+    arrival; it changes only at arrivals.
 
     Abstract state: the frames in flight (captured, not yet arrived), oldest first, and
     the latest arrived frame. One handler serves the capture and the arrival events.
@@ -161,8 +221,12 @@ class DepthCameraSystem(LeafSystem):
         self._period = 1.0 / config.rate_hz
         self._delay = float(config.delay_s)
         self._offsets, self._cycle = capture_schedule(config, seed, encoder_period_s)
-        self._intrinsics = camera_intrinsics(config)
+        self._intrinsics = rendered_intrinsics(config)
         self.DeclareAbstractInputPort("depth_image_32f", AbstractValue.Make(ImageDepth32F()))
+        self._columns = None
+        if config.render_stride > 1:
+            self._columns = self.DeclareAbstractInputPort(
+                "depth_image_32f_columns", AbstractValue.Make(ImageDepth32F()))
         self._pending = self.DeclareAbstractState(AbstractValue.Make(()))
         self._latest = self.DeclareAbstractState(AbstractValue.Make(DepthFrame.empty()))
         self.DeclareAbstractOutputPort(
@@ -179,7 +243,8 @@ class DepthCameraSystem(LeafSystem):
 
     @property
     def intrinsics(self) -> CameraIntrinsics:
-        """Intrinsics of the delivered (full-resolution) images."""
+        """Intrinsics of the delivered images (full resolution, or subsampled by
+        ``render_stride``)."""
         return self._intrinsics
 
     @property
@@ -203,7 +268,9 @@ class DepthCameraSystem(LeafSystem):
         if k is not None:
             image = self.get_input_port(0).Eval(context)
             clean = np.asarray(image.data)[:, :, 0]
-            depth = corrupt_depth(clean, self._config, self._seed, k)
+            columns = (None if self._columns is None
+                       else np.asarray(self._columns.Eval(context).data)[:, :, 0])
+            depth = corrupt_depth(clean, self._config, self._seed, k, columns)
             pending.append(DepthFrame(t, t + self._delay, depth, k))
         while pending and pending[0].arrival_time_s <= t + 1e-9:
             latest = pending.pop(0)
@@ -219,12 +286,23 @@ def AddDepthCamera(builder: DiagramBuilder, scene_graph: SceneGraph, parent_fram
                    encoder_period_s: float = 1e-3) -> tuple[RgbdSensor, DepthCameraSystem]:
     """Adds an RgbdSensor rigidly attached at the origin of the geometry frame
     ``parent_frame_id`` (Drake camera axes: +z forward, +x right, +y down) and the
-    :class:`DepthCameraSystem` that samples, corrupts and delays its depth images."""
+    :class:`DepthCameraSystem` that samples, corrupts and delays its depth images. With
+    ``render_stride`` s > 1 the sensor renders the kept rows, and a second one
+    (``NAME_rgbd_columns``, returned by neither) the kept columns."""
     ensure_vtk_renderer(scene_graph)
-    sensor = builder.AddNamedSystem(
-        f"{name}_rgbd", RgbdSensor(parent_frame_id, RigidTransform(),
-                                   depth_render_camera(config)))
-    builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    s = config.render_stride
+    grids = {"": (1, s)}  # (column stride, row stride)
+    if s > 1:
+        grids["_columns"] = (s, 1)
+    sensors = {}
+    for suffix, strides in grids.items():
+        sensors[suffix] = builder.AddNamedSystem(
+            f"{name}_rgbd{suffix}", RgbdSensor(parent_frame_id, RigidTransform(),
+                                               depth_render_camera(config, strides=strides)))
+        builder.Connect(scene_graph.get_query_output_port(),
+                        sensors[suffix].query_object_input_port())
     camera = builder.AddNamedSystem(name, DepthCameraSystem(config, seed, encoder_period_s))
-    builder.Connect(sensor.depth_image_32F_output_port(), camera.get_input_port(0))
-    return sensor, camera
+    for suffix, sensor in sensors.items():
+        builder.Connect(sensor.depth_image_32F_output_port(),
+                        camera.GetInputPort(f"depth_image_32f{suffix}"))
+    return sensors[""], camera

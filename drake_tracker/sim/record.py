@@ -4,8 +4,9 @@ What is stored (see ``drake_tracker.recording`` for the ``.npz`` keys):
 
 * every encoder reading, at the full encoder rate, stamped with its sample time;
 * every depth image that arrived during the run, subsampled by ``image_stride``
-  (``core.camera.subsample``: pixels (i*stride, j*stride)) with the matching
-  intrinsics, and its capture and arrival times;
+  (``core.camera.subsample``: pixels (i*stride, j*stride) of the full-resolution
+  camera, whatever ``camera.render_stride`` rendered) with the matching intrinsics,
+  and its capture and arrival times;
 * ground truth (joint angles, bias, camera offset, hand pose in the true camera frame)
   at ``truth_rate_hz`` (default 100 Hz), sampled exactly at ``j / truth_rate_hz``.
 
@@ -65,6 +66,12 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     if not duration > 0:
         raise ValueError(f"duration_s must be > 0, got {duration}")
 
+    # The camera delivers every render_stride-th pixel already: the rest of the stride.
+    render_stride = scenario.camera.render_stride
+    if image_stride % render_stride:
+        raise ValueError(f"image_stride {image_stride} is not a multiple of "
+                         f"camera.render_stride {render_stride}")
+    frame_stride = image_stride // render_stride
     builder = DiagramBuilder()
     world = AddSimulatedWorld(builder, scenario)
     probes = (add_systems(builder, world) if add_systems else None) or {}
@@ -124,7 +131,7 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
             last_seq = frame.sequence
             captures.append(frame.capture_time_s)
             arrivals.append(frame.arrival_time_s)
-            images.append(np.array(subsample(frame.depth_m, image_stride), np.float32))
+            images.append(np.array(subsample(frame.depth_m, frame_stride), np.float32))
         if sample_truth and t > 0.0:
             sample_truth_now(float(t))
     bar.close()
@@ -137,7 +144,7 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     latest = np.clip(np.searchsorted(reading_times, truth_times + 1e-9, side="right") - 1,
                      0, None)
     truth_bias = np.array(biases, float).reshape(-1, len(world.robot_joint_names))[latest]
-    intrinsics = world.intrinsics.subsampled(image_stride)
+    intrinsics = world.intrinsics.subsampled(frame_stride)
     n = len(world.robot_joint_names)
     run = RecordedRun(
         robot_config_yaml=yaml_dump(dataclasses.asdict(world.robot_config)),
