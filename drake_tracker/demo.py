@@ -22,7 +22,10 @@ Writes to ``--out`` (default ``out/demo``):
 A progress bar of simulated seconds goes to stderr, with the live Meshcat URL (the live
 view ends with the run).
 
-``encoders_only`` is computed from the recorded readings; ``full_fusion`` is the
+The simulated camera renders only the pixels the tracker reads
+(:func:`render_what_the_tracker_reads`; the same pixels, silhouettes and noise law as
+the full-resolution camera subsampled). ``encoders_only`` is computed from the recorded
+readings; ``full_fusion`` is the
 tracker running inside the simulation Diagram (``AddTracker`` wired to the world's
 ports), its ``X_CE`` output sampled at the truth times. ``report.json`` also holds the
 simulation's real-time factor (simulated seconds per wall-clock second).
@@ -103,6 +106,7 @@ def demo_hook(meshcat, params: TrackerParams) -> Callable:
     )
     from pydrake.systems.primitives import ConstantVectorSource, Multiplexer
 
+    from drake_tracker.sim.depth_camera import camera_intrinsics
     from drake_tracker.systems.add_tracker import AddTracker
     from drake_tracker.systems.point_cloud import DepthFrameToPointCloud
     from drake_tracker.visualization import (
@@ -135,16 +139,18 @@ def demo_hook(meshcat, params: TrackerParams) -> Callable:
             "true_camera_pose", FramePoseInWorld(world.plant, world.camera_frame))
         builder.Connect(world.port("plant_positions"), true_camera.get_input_port())
         AddGhostRobot(builder, world.robot_config, meshcat, mux.get_output_port(),
-                      "encoders_only", ENCODERS_RGBA, camera_pose=true_camera.get_output_port())
+                      "encoders_only", ENCODERS_RGBA, camera_pose=true_camera.get_output_port(),
+                      publish_period_s=period)
         AddGhostRobot(builder, world.robot_config, meshcat,
                       tracker.port("estimated_position"), "estimate", ESTIMATE_RGBA,
-                      camera_pose=true_camera.get_output_port())
+                      camera_pose=true_camera.get_output_port(), publish_period_s=period)
+        full_camera = camera_intrinsics(world.scenario.camera)
         for name, pose, rgba in (("true_camera", true_camera.get_output_port(),
                                   TRUE_CAMERA_RGBA),
                                  ("estimated_camera", tracker.port("X_WC"), ESTIMATE_RGBA)):
             frustum = builder.AddNamedSystem(
                 f"{name}_frustum",
-                CameraFrustumVisualizer(meshcat, name, world.intrinsics, rgba,
+                CameraFrustumVisualizer(meshcat, name, full_camera, rgba,
                                         publish_period_s=period))
             builder.Connect(pose, frustum.get_input_port())
         cloud = builder.AddNamedSystem("point_cloud", DepthFrameToPointCloud(world.intrinsics))
@@ -162,6 +168,23 @@ def demo_hook(meshcat, params: TrackerParams) -> Callable:
         return {"full_fusion_X_CE": tracker.port("X_CE")}
 
     return hook
+
+
+def render_what_the_tracker_reads(scenario: Scenario, params: TrackerParams) -> Scenario:
+    """``scenario`` with the camera rendering only the pixels the tracker reads
+    (``camera.render_stride`` = the tracker's subsampling stride) unless the scenario
+    sets a ``render_stride`` other than 1: the tracker sees the same pixels either way
+    (``sim.depth_camera``), at a fraction of the rendering cost."""
+    import copy
+
+    from drake_tracker.core.camera import stride_for_width
+
+    if scenario.camera.render_stride != 1:
+        return scenario
+    fast = copy.deepcopy(scenario)
+    fast.camera.render_stride = stride_for_width(scenario.camera.width,
+                                                 params.image.image_width_px)
+    return fast
 
 
 def legend_entries() -> list:
@@ -241,7 +264,9 @@ def run_demo(args, scenario: Scenario | None = None, params: TrackerParams | Non
           f"{out}/meshcat.html keeps the recording)\n"
           "  truth: the robot's own colours; encoders only: translucent blue; estimate: "
           "translucent green", flush=True)
-    run = simulate_and_record(scenario, duration_s=getattr(args, "duration", None),
+    simulated = render_what_the_tracker_reads(scenario, params)
+    run = simulate_and_record(simulated, duration_s=getattr(args, "duration", None),
+                              image_stride=simulated.camera.render_stride,
                               add_systems=demo_hook(meshcat, params), validate=False,
                               progress=progress)
     meshcat.StopRecording()

@@ -71,7 +71,8 @@ def recolor_illustration(plant: MultibodyPlant, scene_graph: SceneGraph, rgba: R
 def AddGhostRobot(builder: DiagramBuilder, config: RobotConfig, meshcat: Meshcat,
                   positions: OutputPort, name: str, rgba: Rgba,
                   with_camera_joints: bool = True,
-                  camera_pose: OutputPort | None = None) -> MeshcatVisualizer:
+                  camera_pose: OutputPort | None = None,
+                  publish_period_s: float = 1.0 / 30.0) -> MeshcatVisualizer:
     """Draws the robot of ``config`` at ``positions`` (its joints in position order; with
     ``with_camera_joints`` the tracker model's six virtual joints come along) in
     ``meshcat`` under ``/drake/<name>``, in colour ``rgba``. Bodies welded to the world
@@ -80,7 +81,8 @@ def AddGhostRobot(builder: DiagramBuilder, config: RobotConfig, meshcat: Meshcat
     With ``camera_pose`` (AbstractValue[RigidTransform] X_WC of the true camera) the
     whole ghost is moved so that its own camera frame sits there: its hand then shows
     the hand pose in the camera frame that ``positions`` imply (what the demo's errors
-    measure), seen from the real camera."""
+    measure), seen from the real camera. Both are published every ``publish_period_s``
+    (the recording's frame period; Drake's default would publish twice as often)."""
     scene_graph = builder.AddNamedSystem(f"{name}_scene_graph", SceneGraph())
     plant = MultibodyPlant(time_step=0.0)
     plant.RegisterAsSourceForSceneGraph(scene_graph)
@@ -95,12 +97,14 @@ def AddGhostRobot(builder: DiagramBuilder, config: RobotConfig, meshcat: Meshcat
     builder.Connect(positions, to_pose.get_input_port())
     builder.Connect(to_pose.get_output_port(),
                     scene_graph.get_source_pose_port(plant.get_source_id()))
-    params = MeshcatVisualizerParams(role=Role.kIllustration, prefix=name)
+    params = MeshcatVisualizerParams(role=Role.kIllustration, prefix=name,
+                                     publish_period=publish_period_s)
     visualizer = MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
     if camera_pose is not None:
         align = builder.AddNamedSystem(
             f"{name}_camera_alignment",
-            AlignGhostToCamera(meshcat, f"/drake/{name}", plant, camera_frame))
+            AlignGhostToCamera(meshcat, f"/drake/{name}", plant, camera_frame,
+                               publish_period_s))
         builder.Connect(positions, align.GetInputPort("positions"))
         builder.Connect(camera_pose, align.GetInputPort("X_WC"))
     return visualizer
