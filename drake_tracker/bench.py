@@ -16,7 +16,14 @@ Keys of ``bench.json``:
 * ``cad_over_bench_cost_per_evaluation``: fused evaluation cost, CAD robot / bench robot;
 * ``image_updates_per_s_default``: the bench robot with the default parameters;
 * ``kf_step_us``: one predict+update of the whole bank (15 joints);
-* ``replay_us_per_reading``: re-filtering one buffered reading after a delayed image.
+* ``replay_us_per_reading``: re-filtering one buffered reading after a delayed image;
+* ``demo``: the demo's real-time factor (simulated seconds per wall-clock second) on the
+  first ``duration_s`` of its default scenario, with its Diagram as ``drake-tracker
+  demo`` builds it (tracker, Meshcat views and recording, the camera rendering what the
+  tracker reads): ``real_time_factor`` over the whole slice (the first second includes
+  the start-up acquisition, 150 particles per block), ``real_time_factor_after_1s``,
+  and ``real_time_factor_cpu`` (simulated seconds per second of the process's CPU
+  time, which a loaded machine does not inflate).
 """
 
 from __future__ import annotations
@@ -78,6 +85,44 @@ def bench_kalman(model, params: TrackerParams, repeats: int = 20000) -> dict:
             "bank_variance_check": float(buffer.present()[1][VAR_A].max())}
 
 
+def bench_demo(params: TrackerParams, duration_s: float) -> dict:
+    """The demo's real-time factor on its first ``duration_s`` (see the module doc)."""
+    from pydrake.systems.framework import LeafSystem
+
+    from drake_tracker.demo import (
+        DEFAULT_SCENARIO,
+        demo_hook,
+        render_what_the_tracker_reads,
+        start_meshcat,
+    )
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario import load_scenario
+
+    scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
+    hook = demo_hook(start_meshcat(), params)
+    marks = []  # (simulated s, wall s, CPU s) at every simulated second
+
+    def add_systems(builder, world):
+        clock = LeafSystem()
+        clock.DeclarePeriodicPublishEvent(1.0, 0.0, lambda context: marks.append(
+            (context.get_time(), time.perf_counter(), time.process_time())))
+        builder.AddNamedSystem("bench_clock", clock)
+        return hook(builder, world)
+
+    run = simulate_and_record(scenario, duration_s=duration_s,
+                              image_stride=scenario.camera.render_stride,
+                              add_systems=add_systems, validate=False)
+    wall_end, cpu_end = time.perf_counter(), time.process_time()
+    after = [(t, wall) for t, wall, _ in marks if t == 1.0]
+    return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s,
+            "render_stride": scenario.camera.render_stride,
+            # the same figure as the demo's report.json
+            "real_time_factor": run.duration_s / run.extra["wall_time_s"],
+            "real_time_factor_after_1s": ((run.duration_s - 1.0) / (wall_end - after[0][1])
+                                          if after and run.duration_s > 1.5 else None),
+            "real_time_factor_cpu": run.duration_s / (cpu_end - marks[0][2])}
+
+
 def run_benchmarks(quick: bool = False) -> dict:
     """All figures of ``bench.json`` (see the module docstring)."""
     from drake_tracker.bench_likelihood import bench_robot
@@ -94,6 +139,7 @@ def run_benchmarks(quick: bool = False) -> dict:
     default = bench_image_update(apollo, camera, params, params.image.num_particles,
                                  repeats)
     kalman = bench_kalman(apollo, params)
+    demo = bench_demo(params, 2.0 if quick else 4.0)
     bench, cad = results["apollo"], results["apollo_cad"]
     size = camera.subsampled(bench_stride(camera, params))
     return {
@@ -110,6 +156,7 @@ def run_benchmarks(quick: bool = False) -> dict:
         "evaluations_default": default["evaluations"],
         "kf_step_us": kalman["kf_step_us"],
         "replay_us_per_reading": kalman["replay_us_per_reading"],
+        "demo": demo,
     }
 
 
@@ -168,7 +215,17 @@ def format_bench(result: dict) -> str:
         f"Kalman bank step: {result['kf_step_us']:.2f} us   (target <= 20)",
         f"replay: {result['replay_us_per_reading']:.2f} us per re-filtered reading",
     ]
+    lines.append(format_demo(result["demo"]))
     return "\n".join(lines)
+
+
+def format_demo(demo: dict) -> str:
+    """One line: the demo's real-time factors of :func:`bench_demo`."""
+    after = demo["real_time_factor_after_1s"]
+    after = "" if after is None else f", {after:.2f} after the first second"
+    return (f"demo real-time factor ({demo['scenario']}, first {demo['duration_s']:g} s "
+            f"simulated): {demo['real_time_factor']:.2f} wall-clock{after}, "
+            f"{demo['real_time_factor_cpu']:.2f} per second of CPU time   (target >= 1.0)")
 
 
 def run_bench(args) -> int:

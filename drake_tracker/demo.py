@@ -225,7 +225,7 @@ def write_diagram(graphviz: str, out: Path) -> Path | None:
     return png
 
 
-def _start_meshcat():
+def start_meshcat():
     """A Meshcat server on localhost at a free port, without Drake's own INFO line (the
     demo prints the URL with what it shows)."""
     import logging
@@ -259,7 +259,7 @@ def run_demo(args, scenario: Scenario | None = None, params: TrackerParams | Non
         params = load_tracker_params(getattr(args, "params", None))
     out = Path(getattr(args, "out", None) or "out/demo")
     out.mkdir(parents=True, exist_ok=True)
-    meshcat = _start_meshcat()
+    meshcat = start_meshcat()
     print(f"live view: {meshcat.web_url()} (open it now: it ends with the run; "
           f"{out}/meshcat.html keeps the recording)\n"
           "  truth: the robot's own colours; encoders only: translucent blue; estimate: "
