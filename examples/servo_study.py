@@ -9,7 +9,8 @@ The Diagram, once per feedback (a, b, c), is
     world (dynamic plant + joint servo + biased encoders [+ depth camera])
       -> feedback (X_CE and joint angles):
                         (a) forward kinematics of the encoders, nominal camera
-                        (b) drake_tracker's AddTracker(...): X_CE, estimated_position
+                        (b) drake_tracker's AddTracker(...): X_CE, estimated_position,
+                            health (the controller holds the arm while it is LOST)
                         (c) the truth
       -> CameraFrameServo (Cartesian law in the camera frame + Drake's differential IK)
       -> the joint servo's command (InverseDynamicsController)
@@ -30,7 +31,7 @@ from pydrake.systems.primitives import MatrixGain
 from drake_tracker.params import TrackerParams
 from drake_tracker.servo.config import FEEDBACK_LABELS, FEEDBACKS, ServoStudyConfig
 from drake_tracker.servo.controller import CameraFrameServo
-from drake_tracker.servo.feedback import EncoderKinematicsPose
+from drake_tracker.servo.feedback import EncoderKinematicsPose, HealthToUsable
 from drake_tracker.servo.outcomes import format_outcome_table, target_outcomes
 from drake_tracker.servo.report import plot_servo_errors
 from drake_tracker.servo.study import ServoRun, servo_scenario
@@ -63,6 +64,9 @@ def build(config: ServoStudyConfig, feedback: str, scenario, params: TrackerPara
         robot_joints = builder.AddSystem(MatrixGain(select))
         builder.Connect(tracker.port("estimated_position"), robot_joints.get_input_port())
         joints = robot_joints.get_output_port()
+        # The tracker's health: the controller holds the arm while it is LOST.
+        usable = builder.AddSystem(HealthToUsable())
+        builder.Connect(tracker.port("health"), usable.get_input_port(0))
     else:  # (c) the ideal
         X_CE, joints = world.ports["true_X_CE"], world.ports["true_position"]
     controller = builder.AddSystem(CameraFrameServo(
@@ -73,6 +77,8 @@ def build(config: ServoStudyConfig, feedback: str, scenario, params: TrackerPara
                     controller.GetInputPort("measured_position"))
     builder.Connect(world.ports["measurement_time"],
                     controller.GetInputPort("measurement_time"))
+    if feedback == "tracker":
+        builder.Connect(usable.get_output_port(0), controller.GetInputPort("feedback_usable"))
     builder.Connect(controller.GetOutputPort("arm_command"), world.arm_command_input)
     return builder.Build(), world, controller
 

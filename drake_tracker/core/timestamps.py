@@ -100,6 +100,9 @@ class StreamClock:
         self._run_count = 0
         self._run_first_raw = 0.0
         self._run_last_raw = 0.0
+        self._lags: deque[float] = deque(maxlen=RECENT_GAPS)
+        self._lag_run_count = 0
+        self._lag_run_first = 0.0
 
     @property
     def recent_period_s(self) -> float:
@@ -138,6 +141,35 @@ class StreamClock:
         else:
             return self._accept(raw)
         return self._rejected(raw, problem, kind)
+
+    def follow_reference(self, time_s: float, reference_s: float, rejected: bool
+                         ) -> float | None:
+        """Keeps this stream aligned with a reference clock (the images with the joint
+        readings: ``reference_s`` is the buffer's present, ``rejected`` whether the buffer
+        refused ``time_s`` as too old or from the future). After
+        ``reanchor_after_samples`` refusals in a row at the same lag (within half a
+        period: a stall of the reference makes the lag grow instead), the stream is
+        shifted back to its typical lag; returns that shift, else None. A clock step
+        shared by the encoders and the camera needs it: the readings are re-anchored, and
+        the images, still in order among themselves, would be refused for good."""
+        lag = time_s - reference_s
+        if not rejected:
+            self._lags.append(lag)
+            self._lag_run_count = 0
+            return None
+        if len(self._lags) < self.params.reanchor_after_samples:
+            return None  # no typical lag yet (e.g. the first images after the start)
+        if self._lag_run_count and abs(lag - self._lag_run_first) <= 0.5 * self.recent_period_s:
+            self._lag_run_count += 1
+        else:
+            self._lag_run_count, self._lag_run_first = 1, lag
+        if self._lag_run_count < self.params.reanchor_after_samples:
+            return None
+        shift = float(np.median(self._lags)) - lag
+        self.offset_s += shift
+        self.latest_s += shift
+        self._lag_run_count = 0
+        return shift
 
     def _accept(self, raw: float, reanchored_by: float | None = None) -> StampDecision:
         t = raw + self.offset_s
@@ -231,3 +263,18 @@ def problem_kind(problem: str) -> str:
         if words in problem:
             return f"images: {words}"
     return "images: other problems"
+
+
+def follow_buffer(clock: StreamClock, buffer, image_time_s: float,
+                  logger: logging.Logger) -> None:
+    """Runs an accepted image time through ``clock.follow_reference`` against the belief
+    buffer's present (images in a gap of the readings say nothing about the clocks)."""
+    problem = buffer.image_time_problem(image_time_s)
+    if problem is None and buffer.reading_gap_problem(image_time_s) is not None:
+        return
+    shift = clock.follow_reference(image_time_s, buffer.now_s, problem is not None)
+    if shift is not None:
+        logger.warning("image clock re-aligned with the joint readings: %d images in a row "
+                       "were %s at the same lag; from now on their stamps are shifted by "
+                       "%+.4f s", clock.params.reanchor_after_samples,
+                       "from the future" if "future" in problem else "too old", shift)

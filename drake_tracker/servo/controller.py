@@ -20,7 +20,8 @@ Every ``control_period_s`` the :class:`CameraFrameServo`
 
 The same controller runs in the three runs of the study; only its ``X_CE`` input differs.
 Before the first encoder reading it outputs an invalid command (the joint servo holds
-home); until ``hold_s`` it holds the first reading.
+home); until ``hold_s`` it holds the first reading; and it holds the arm while its
+optional ``feedback_usable`` input is 0 (the tracker's health is ``LOST``).
 """
 
 from __future__ import annotations
@@ -93,6 +94,7 @@ class CameraFrameServo(LeafSystem):
         - estimated_position
         - measured_position
         - measurement_time
+        - feedback_usable (optional)
         output_ports:
         - arm_command
         - target_index
@@ -100,7 +102,8 @@ class CameraFrameServo(LeafSystem):
     ``X_CE``: AbstractValue[RigidTransform], the hand in the camera frame it is fed;
     ``estimated_position`` (n): the robot joints' angles it is fed (for the Jacobian);
     ``measured_position`` (n) and ``measurement_time`` (1): the encoders, in
-    ``robot_joint_names`` order. ``arm_command`` (1 + 2m): [valid, q, v] of the arm
+    ``robot_joint_names`` order; ``feedback_usable`` (1, optional): 0 = do not act on
+    the feed. ``arm_command`` (1 + 2m): [valid, q, v] of the arm
     joints in encoder coordinates; ``target_index`` (1): the target servoed to (-1
     during the hold). Discrete state: [valid, q (m), v (m), q_start (m)].
     """
@@ -132,6 +135,7 @@ class CameraFrameServo(LeafSystem):
         self.DeclareVectorInputPort("estimated_position", len(robot_joint_names))
         self.DeclareVectorInputPort("measured_position", len(robot_joint_names))
         self.DeclareVectorInputPort("measurement_time", 1)
+        self._usable = self.DeclareVectorInputPort("feedback_usable", 1)
         self._state = self.DeclareDiscreteState(np.zeros(1 + 3 * m))
         ticket = {self.discrete_state_ticket(self._state)}
         self.DeclareVectorOutputPort(
@@ -158,7 +162,9 @@ class CameraFrameServo(LeafSystem):
         t = context.get_time()
         q, v_previous, q_start = x[1:1 + m], x[1 + m:1 + 2 * m], x[1 + 2 * m:]
         v = np.zeros(m)
-        if t >= self._config.hold_s:
+        usable = (not self._usable.HasValue(context)
+                  or self._usable.Eval(context)[0] > 0.5)
+        if t >= self._config.hold_s and usable:
             v = self._joint_velocities(context, t, readings, q, v_previous, q_start)
         x[1:1 + m] = q + self._gains.control_period_s * v
         x[1 + m:1 + 2 * m] = v

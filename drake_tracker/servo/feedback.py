@@ -7,9 +7,14 @@
   its ``estimated_position`` (robot joints), added with ``AddTracker`` on the world's
   encoders and depth camera, in the same Diagram;
 * ``truth`` (c): the hand in the TRUE camera frame and the true angles, the ideal.
+
+The tracker's feed also says whether it may be acted on: ``usable`` is 0 while its
+``health`` is ``LOST`` (the controller then holds the arm).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -18,6 +23,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, OutputPort
 from pydrake.systems.primitives import MatrixGain
 
+from drake_tracker.core.health import HealthState, TrackerHealth
 from drake_tracker.params import TrackerParams
 from drake_tracker.robot import RobotConfig, add_robot
 from drake_tracker.servo.config import FEEDBACKS
@@ -62,20 +68,53 @@ class EncoderKinematicsPose(LeafSystem):
         output.set_value(self._plant.CalcRelativeTransform(self._context, self._C, self._E))
 
 
+class HealthToUsable(LeafSystem):
+    """1 while the tracker's health is not ``LOST``, else 0: whether a controller may act
+    on its estimate (``TrackerSystems.port("health")``'s advice).
+
+    .. pydrake_system::
+
+        name: HealthToUsable
+        input_ports:
+        - health
+        output_ports:
+        - usable
+    """
+
+    def __init__(self):
+        super().__init__()
+        self.DeclareAbstractInputPort("health", AbstractValue.Make(TrackerHealth()))
+        self.DeclareVectorOutputPort(
+            "usable", 1, lambda c, o: o.SetAtIndex(
+                0, float(self.get_input_port(0).Eval(c).state != HealthState.LOST)))
+
+
+@dataclass
+class Feedback:
+    """What one feedback gives the controller."""
+
+    #: AbstractValue[RigidTransform]: the hand in the camera frame.
+    X_CE: OutputPort
+    #: The robot joints' angles (``robot_joint_names`` order), for the Jacobian.
+    joints: OutputPort
+    #: 1 while the feed may be acted on (the tracker's health); None: always.
+    usable: OutputPort | None = None
+    #: The tracker's systems in run (b).
+    tracker: TrackerSystems | None = None
+
+
 def AddFeedback(builder: DiagramBuilder, world: ServoWorld, feedback: str,
-                params: TrackerParams | None = None
-                ) -> tuple[OutputPort, OutputPort, TrackerSystems | None]:
-    """The ``X_CE`` port and the robot joints' angle port (``robot_joint_names`` order)
-    of ``feedback`` (one of ``FEEDBACKS``), and the tracker's systems when it is
-    ``tracker`` (which needs the world's depth camera)."""
+                params: TrackerParams | None = None) -> Feedback:
+    """The ports of ``feedback`` (one of ``FEEDBACKS``); ``tracker`` adds the tracker,
+    which needs the world's depth camera."""
     require_one_of(feedback, FEEDBACKS, "feedback")
     if feedback == "truth":
-        return world.ports["true_X_CE"], world.ports["true_position"], None
+        return Feedback(world.ports["true_X_CE"], world.ports["true_position"])
     if feedback == "encoders":
         fk = builder.AddNamedSystem("encoders_X_CE", EncoderKinematicsPose(
             world.robot_config, world.robot_joint_names))
         builder.Connect(world.ports["measured_position"], fk.get_input_port(0))
-        return fk.GetOutputPort("X_CE"), world.ports["measured_position"], None
+        return Feedback(fk.GetOutputPort("X_CE"), world.ports["measured_position"])
     if "depth_frame" not in world.ports:
         raise ValueError("feedback 'tracker' needs the world's depth camera "
                          "(AddServoWorld(..., with_camera=True))")
@@ -91,4 +130,7 @@ def AddFeedback(builder: DiagramBuilder, world: ServoWorld, feedback: str,
         select[row, names.index(name)] = 1.0
     robot_joints = builder.AddNamedSystem("tracker_robot_joints", MatrixGain(select))
     builder.Connect(tracker.port("estimated_position"), robot_joints.get_input_port())
-    return tracker.port("X_CE"), robot_joints.get_output_port(), tracker
+    usable = builder.AddNamedSystem("tracker_health_to_usable", HealthToUsable())
+    builder.Connect(tracker.port("health"), usable.get_input_port(0))
+    return Feedback(tracker.port("X_CE"), robot_joints.get_output_port(),
+                    usable.GetOutputPort("usable"), tracker)

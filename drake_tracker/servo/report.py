@@ -134,7 +134,10 @@ def run_servo_study(config: ServoStudyConfig, out: Path, params: TrackerParams |
                      "targets": [o.as_dict() for o in outcomes[f]],
                      "simulated_s": float(run.times_s[-1]),
                      "wall_time_s": run.wall_time_s,
-                     "real_time_factor": run.real_time_factor}
+                     "real_time_factor": run.real_time_factor,
+                     # Time the controller held the arm because the tracker was lost.
+                     "feedback_unusable_s": float(
+                         np.sum(~run.feedback_usable) * config.sample_period_s)}
                  for f, run in runs.items()},
     }
     title = (f"{scenario.name}, dynamic: true hand error in the camera frame while servoing "
@@ -160,8 +163,10 @@ def run_servo_command(args, config: ServoStudyConfig, params: TrackerParams | No
           "hand error in the camera frame at the end of each target's dwell")
     print(report["table"])
     for run in report["runs"].values():
+        lost = (f"; held {run['feedback_unusable_s']:.2f} s while the tracker was lost"
+                if run["feedback_unusable_s"] > 0 else "")
         print(f"{run['label']}: real-time factor {run['real_time_factor']:.2f} "
-              f"({run['simulated_s']:.1f} s simulated in {run['wall_time_s']:.1f} s)")
+              f"({run['simulated_s']:.1f} s simulated in {run['wall_time_s']:.1f} s){lost}")
     written = ["report.json", "servo_errors.png", "errors.csv"]
     written += [] if args.no_meshcat else ["meshcat.html"]
     print(f"wrote to {out}/: {', '.join(written)}; wall time "

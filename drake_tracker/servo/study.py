@@ -70,11 +70,13 @@ def build_servo_diagram(config: ServoStudyConfig, feedback: str,
     builder = DiagramBuilder()
     world = AddServoWorld(builder, scenario, config.gains.joint_servo_frequency_rad_per_s,
                           with_camera=feedback == "tracker")
-    X_CE, joints, tracker = AddFeedback(builder, world, feedback, params)
+    feed = AddFeedback(builder, world, feedback, params)
     controller = builder.AddNamedSystem("servo_controller", CameraFrameServo(
         world.robot_config, world.robot_joint_names, world.arm_joint_names, config))
-    builder.Connect(X_CE, controller.GetInputPort("X_CE"))
-    builder.Connect(joints, controller.GetInputPort("estimated_position"))
+    builder.Connect(feed.X_CE, controller.GetInputPort("X_CE"))
+    builder.Connect(feed.joints, controller.GetInputPort("estimated_position"))
+    if feed.usable is not None:
+        builder.Connect(feed.usable, controller.GetInputPort("feedback_usable"))
     builder.Connect(world.ports["measured_position"],
                     controller.GetInputPort("measured_position"))
     builder.Connect(world.ports["measurement_time"],
@@ -84,7 +86,7 @@ def build_servo_diagram(config: ServoStudyConfig, feedback: str,
         visualize(builder, world, feedback)
     diagram = builder.Build()
     diagram.set_name(f"servo_{feedback}")
-    return ServoDiagram(diagram, world, controller, feedback, tracker)
+    return ServoDiagram(diagram, world, controller, feedback, feed.tracker)
 
 
 @dataclass
@@ -100,6 +102,8 @@ class ServoRun:
     #: (T,) the target servoed to (-1 during the hold).
     target_index: np.ndarray
     wall_time_s: float
+    #: (T,) whether the controller could act on its feed (the tracker's health).
+    feedback_usable: np.ndarray | None = None
 
     @property
     def label(self) -> str:
@@ -127,7 +131,8 @@ def run_servo(config: ServoStudyConfig, feedback: str, scenario: Scenario | None
     contexts = [p.get_system().GetMyContextFromRoot(root) for p in ports]
     dt = config.sample_period_s
     times = np.arange(0.0, duration + 0.5 * dt, dt)
-    true_X, fed_X, index = [], [], []
+    usable_port = built.controller.GetInputPort("feedback_usable")
+    true_X, fed_X, index, usable = [], [], [], []
     wall_start = time.perf_counter()
     simulator.Initialize()
     with SimulatedSecondsBar(duration, f"servo {feedback}", enabled=progress) as bar:
@@ -137,5 +142,8 @@ def run_servo(config: ServoStudyConfig, feedback: str, scenario: Scenario | None
             true_X.append(ports[0].Eval(contexts[0]).GetAsMatrix4())
             fed_X.append(ports[1].Eval(contexts[1]).GetAsMatrix4())
             index.append(int(ports[2].Eval(contexts[2])[0]))
+            usable.append(not usable_port.HasValue(contexts[1])
+                          or usable_port.Eval(contexts[1])[0] > 0.5)
     wall = time.perf_counter() - wall_start
-    return ServoRun(feedback, times, np.array(true_X), np.array(fed_X), np.array(index), wall)
+    return ServoRun(feedback, times, np.array(true_X), np.array(fed_X), np.array(index), wall,
+                    np.array(usable))

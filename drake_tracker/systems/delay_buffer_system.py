@@ -18,7 +18,13 @@ from drake_tracker.core.pipeline import (
     make_bank_and_prior,
     new_belief_buffer,
 )
-from drake_tracker.core.timestamps import ReadingGate, StampDecision, StreamClock, log_reanchor
+from drake_tracker.core.timestamps import (
+    ReadingGate,
+    StampDecision,
+    StreamClock,
+    follow_buffer,
+    log_reanchor,
+)
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
 
@@ -114,6 +120,8 @@ class DelayBufferSystem(LeafSystem):
 
     def _update(self, context, state):
         s: DelayBufferState = state.get_mutable_abstract_state(int(self._state)).get_value()
+        # Frames are judged against the buffer the CPF system saw (before this reading).
+        self._judge_frame(self.get_input_port(3).Eval(context), s)
         raw = float(self.get_input_port(1).Eval(context)[0])
         if s.readings.is_new(raw):
             reading = np.array(self.get_input_port(0).Eval(context), float)
@@ -128,7 +136,6 @@ class DelayBufferSystem(LeafSystem):
                     s.buffer = new_belief_buffer(self._model, self._params, 0.0, None)
                 s.buffer.advance_to(t)
                 s.last_reading_time_s = t
-        self._judge_frame(self.get_input_port(3).Eval(context), s)
         message = self.get_input_port(2).Eval(context)
         if message.id > s.last_observation_id and message.observation is not None:
             s.last_observation_id = message.id
@@ -151,6 +158,8 @@ class DelayBufferSystem(LeafSystem):
         s.frame_decision = s.image_clock.check(image_time(frame, self._params))
         if s.frame_decision.reanchored_by_s is not None:
             log_reanchor(log, "image", s.frame_decision, frame.capture_time_s, s.image_clock)
+        if s.frame_decision.time_s is not None:
+            follow_buffer(s.image_clock, s.buffer, s.frame_decision.time_s, log)
 
     def _calc_correction(self, context, output):
         output.set_value(context.get_abstract_state(int(self._state)).get_value().correction)
