@@ -133,7 +133,7 @@ class Tracker:
         if not self.params.use_joint_readings:
             arrival = frame.arrival_time_s + decision.time_s - self.images.image_time(frame)
             self.buffer.advance_to(max(t, arrival) if np.isfinite(arrival) else t)
-        follow_buffer(self.image_clock, self.buffer, t, log)  # a clock step shared by both
+        follow_buffer(self.image_clock, self.buffer, t, log, self.readings.clock)
         if not self.images.wants_at(t, self.next_image_due_s, self.last_applied_image_s):
             self.num_images_skipped += 1
             return False

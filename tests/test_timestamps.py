@@ -75,6 +75,23 @@ def test_images_may_come_out_of_order_within_the_window():
     assert "older than" in clock.check(0.05).problem
 
 
+def test_images_follow_the_readings_clock_but_not_a_stall_of_the_readings():
+    clock = StreamClock("image", TimestampParams(), max_behind_s=1.0)
+    period, lag = 1 / 30, -0.05
+    for k in range(10):  # accepted by the buffer, 50 ms behind its present
+        t = clock.check(k * period).time_s
+        assert clock.follow_reference(t, t - lag, rejected=False) is None
+    # The readings stall at 0.3 s: the images are from the future, the lag grows.
+    for k in range(10, 20):
+        t = clock.check(k * period).time_s
+        assert clock.follow_reference(t, 0.3, rejected=True) is None
+    # The camera's clock jumps 1 s ahead of the readings' and stays there.
+    shifts = [clock.follow_reference(clock.check(k * period + 1.0).time_s,
+                                     k * period - lag, rejected=True) for k in range(20, 25)]
+    assert shifts[:4] == [None] * 4 and shifts[4] == pytest.approx(-1.0, abs=1e-9)
+    assert clock.check(25 * period + 1.0).time_s == pytest.approx(25 * period, abs=1e-9)
+
+
 def test_warnings_are_rate_limited_per_kind(caplog):
     warnings = RateLimitedWarning(logging.getLogger("test"))
     with caplog.at_level(logging.WARNING):
@@ -322,3 +339,25 @@ def assert_same_when_settled(run, diagram, offline):
 
 def _with_arrivals(run, arrivals):
     return replace(run, image_arrival_times_s=arrivals)
+
+
+def test_a_clock_step_shared_by_encoders_and_camera_is_followed_by_both(apollo, run, caplog):
+    """A host clock stepping back by 1 s moves both streams: the readings are re-anchored,
+    and the images (in order among themselves) would then be older than the buffer for
+    good; they are re-aligned after N in a row at the same lag, offline and in the
+    Diagram alike."""
+    stamps = run.reading_times_s - 1.0 * (run.reading_times_s >= 0.2)
+    captures = run.image_capture_times_s - 1.0 * (run.image_capture_times_s >= 0.2)
+    stepped = replace(run, image_capture_times_s=captures)
+    p = small_params()
+    with caplog.at_level(logging.WARNING):
+        offline, applied = feed(Tracker(apollo, run.camera_intrinsics, p), stepped,
+                                stamps=stamps)
+    assert "re-aligned" in caplog.text and caplog.text.count("re-anchored") == 1
+    after = [j for j in applied if run.image_capture_times_s[j] >= 0.2]
+    n = p.timestamps.reanchor_after_samples
+    assert not any(applied[j] for j in after[:n]) and all(applied[j] for j in after[n:])
+    assert len(after) > n + 1
+    diagram, images_applied = simulate(apollo, stepped, p, stamps)
+    assert images_applied == sum(applied.values())
+    assert_same_when_settled(stepped, diagram, offline)

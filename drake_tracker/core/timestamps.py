@@ -95,6 +95,8 @@ class StreamClock:
         self.params = params
         self.max_behind_s = float(max_behind_s)
         self.offset_s = 0.0
+        #: The shift of the latest re-anchoring (s; 0 before any).
+        self.last_shift_s = 0.0
         self.latest_s: float | None = None
         self._gaps: deque[float] = deque(maxlen=RECENT_GAPS)
         self._run_count = 0
@@ -142,8 +144,8 @@ class StreamClock:
             return self._accept(raw)
         return self._rejected(raw, problem, kind)
 
-    def follow_reference(self, time_s: float, reference_s: float, rejected: bool
-                         ) -> float | None:
+    def follow_reference(self, time_s: float, reference_s: float, rejected: bool,
+                         reference_shift_s: float = 0.0) -> float | None:
         """Keeps this stream aligned with a reference clock (the images with the joint
         readings: ``reference_s`` is the buffer's present, ``rejected`` whether the buffer
         refused ``time_s`` as too old or from the future). After
@@ -151,7 +153,9 @@ class StreamClock:
         period: a stall of the reference makes the lag grow instead), the stream is
         shifted back to its typical lag; returns that shift, else None. A clock step
         shared by the encoders and the camera needs it: the readings are re-anchored, and
-        the images, still in order among themselves, would be refused for good."""
+        the images, still in order among themselves, would be refused for good; when
+        the shift is within half a period of the reference's own latest re-anchoring
+        (``reference_shift_s``), it is taken to be the same step and that shift is used."""
         lag = time_s - reference_s
         if not rejected:
             self._lags.append(lag)
@@ -166,8 +170,11 @@ class StreamClock:
         if self._lag_run_count < self.params.reanchor_after_samples:
             return None
         shift = float(np.median(self._lags)) - lag
+        if reference_shift_s and abs(shift - reference_shift_s) <= 0.5 * self.recent_period_s:
+            shift = reference_shift_s
         self.offset_s += shift
         self.latest_s += shift
+        self.last_shift_s = shift
         self._lag_run_count = 0
         return shift
 
@@ -192,7 +199,7 @@ class StreamClock:
             return StampDecision(None, problem, kind)
         new_offset = self.latest_s + self.recent_period_s - self._run_first_raw
         shift = new_offset - self.offset_s
-        self.offset_s = new_offset
+        self.offset_s, self.last_shift_s = new_offset, shift
         return self._accept(raw, reanchored_by=shift)
 
 
@@ -265,14 +272,15 @@ def problem_kind(problem: str) -> str:
     return "images: other problems"
 
 
-def follow_buffer(clock: StreamClock, buffer, image_time_s: float,
-                  logger: logging.Logger) -> None:
+def follow_buffer(clock: StreamClock, buffer, image_time_s: float, logger: logging.Logger,
+                  readings_clock: StreamClock) -> None:
     """Runs an accepted image time through ``clock.follow_reference`` against the belief
     buffer's present (images in a gap of the readings say nothing about the clocks)."""
     problem = buffer.image_time_problem(image_time_s)
     if problem is None and buffer.reading_gap_problem(image_time_s) is not None:
         return
-    shift = clock.follow_reference(image_time_s, buffer.now_s, problem is not None)
+    shift = clock.follow_reference(image_time_s, buffer.now_s, problem is not None,
+                                   readings_clock.last_shift_s)
     if shift is not None:
         logger.warning("image clock re-aligned with the joint readings: %d images in a row "
                        "were %s at the same lag; from now on their stamps are shifted by "

@@ -159,7 +159,8 @@ class DelayBufferSystem(LeafSystem):
         if s.frame_decision.reanchored_by_s is not None:
             log_reanchor(log, "image", s.frame_decision, frame.capture_time_s, s.image_clock)
         if s.frame_decision.time_s is not None:
-            follow_buffer(s.image_clock, s.buffer, s.frame_decision.time_s, log)
+            follow_buffer(s.image_clock, s.buffer, s.frame_decision.time_s, log,
+                          s.readings.clock)
 
     def _calc_correction(self, context, output):
         output.set_value(context.get_abstract_state(int(self._state)).get_value().correction)
