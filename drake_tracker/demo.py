@@ -37,6 +37,7 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -46,6 +47,9 @@ from drake_tracker.params import TrackerParams, load_tracker_params
 from drake_tracker.recording import RecordedRun
 from drake_tracker.robot import build_tracker_model
 from drake_tracker.sim.scenario import Scenario, load_scenario
+
+if TYPE_CHECKING:
+    from pydrake.geometry import Meshcat
 
 DEFAULT_SCENARIO = "s-full-arm/constant"
 
@@ -225,7 +229,7 @@ def write_diagram(graphviz: str, out: Path) -> Path | None:
     return png
 
 
-def start_meshcat():
+def start_meshcat() -> Meshcat:
     """A Meshcat server on localhost at a free port, without Drake's own INFO line (the
     demo prints the URL with what it shows)."""
     import logging
