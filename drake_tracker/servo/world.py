@@ -35,6 +35,7 @@ from pydrake.systems.framework import (
 )
 from pydrake.systems.primitives import Demultiplexer
 
+from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.robot import (
     VIRTUAL_JOINT_NAMES,
     RobotConfig,
@@ -44,7 +45,11 @@ from drake_tracker.robot import (
     build_tracker_model,
 )
 from drake_tracker.sim.config import Scenario, scenario_occluders
-from drake_tracker.sim.depth_camera import AddDepthCamera, DepthCameraSystem, camera_intrinsics
+from drake_tracker.sim.depth_camera import (
+    AddDepthCamera,
+    DepthCameraSystem,
+    rendered_intrinsics,
+)
 from drake_tracker.sim.encoders import BiasedEncoders
 from drake_tracker.sim.environment import add_environment
 from drake_tracker.sim.occluders import AddOccluders, OccluderMotion
@@ -231,6 +236,7 @@ def AddServoWorld(builder: DiagramBuilder, scenario: Scenario,
                       reference.GetInputPort("arm_command"), ports)
 
 
-def camera_model(scenario: Scenario):
-    """The full-resolution intrinsics of the scenario's camera (for ``AddTracker``)."""
-    return camera_intrinsics(scenario.camera)
+def camera_model(scenario: Scenario) -> CameraIntrinsics:
+    """The intrinsics of the images the scenario's camera delivers (for ``AddTracker``):
+    full resolution, or subsampled by ``camera.render_stride``."""
+    return rendered_intrinsics(scenario.camera)
