@@ -100,6 +100,8 @@ class Tracker:
         t = self.readings.admit(t, reading)
         if t is None:
             return
+        if self.readings.restarted and self.params.use_joint_readings:
+            self.buffer = None  # built on outlier stamps: restart from this reading
         if not self.params.use_joint_readings:
             if self.buffer is not None:
                 self.buffer.advance_to(t)

@@ -69,6 +69,13 @@ def test_a_clock_that_steps_and_stays_is_reanchored_after_n_samples(step_s):
     assert accepted[20] == pytest.approx(0.095 + 0.005 * 4)
 
 
+def test_a_glitched_first_stamp_is_outvoted_by_the_stream():
+    clock = StreamClock("joint reading", TimestampParams(reanchor_after_samples=4))
+    decisions = [clock.check(t) for t in [1e6, 0.005, 0.010, 0.015, 0.020, 0.025]]
+    assert [d.time_s for d in decisions] == [1e6, None, None, None, 0.020, 0.025]
+    assert decisions[4].restarted and not decisions[5].restarted
+
+
 def test_images_may_come_out_of_order_within_the_window():
     clock = StreamClock("image", TimestampParams(), max_behind_s=1.0)
     assert [clock.check(t).time_s for t in (1.0, 1.1, 1.05, 0.5)] == [1.0, 1.1, 1.05, 0.5]
@@ -304,6 +311,26 @@ def test_diagram_nan_burst_gives_one_warning_and_skips_the_image_inside(apollo, 
     assert_same_when_settled(run, diagram, offline)
 
 
+def test_a_glitched_first_stamp_restarts_the_estimate_offline_and_in_the_diagram(
+        apollo, run, caplog):
+    """A finite glitch as the very first stamp (1e6 s) became the time base: the good
+    readings after it were re-anchored to it and no image could be placed again. Now
+    the stream outvotes it and the estimate restarts from the reading that does."""
+    stamps = run.reading_times_s.copy()
+    stamps[0] = 1e6
+    p = small_params()
+    with caplog.at_level(logging.WARNING):
+        tracker = Tracker(apollo, run.camera_intrinsics, p)
+        offline, applied = feed(tracker, run, stamps=stamps)
+    assert "restarted at" in caplog.text
+    assert tracker.estimate().time_s == pytest.approx(run.reading_times_s[-1])
+    late = [j for j in applied if run.image_capture_times_s[j] > 0.1]
+    assert late and all(applied[j] for j in late)
+    diagram, images_applied = simulate(apollo, run, p, stamps)
+    assert images_applied == sum(applied.values())
+    assert_same_when_settled(run, diagram[10:], offline[10:], first=10)
+
+
 def simulate(apollo, run, p, stamps=None, sequences=None):
     """The Diagram on ``run`` (with faulty stamps or sequence numbers): the estimate
     right after each reading's bank update, and the number of images applied."""
@@ -326,12 +353,13 @@ def simulate(apollo, run, p, stamps=None, sequences=None):
     return estimates, cpf.get_value().images_applied
 
 
-def assert_same_when_settled(run, diagram, offline):
+def assert_same_when_settled(run, diagram, offline, first=0):
     """The Diagram applies an image at the first CPF tick after it arrives (<= h later),
-    the offline tracker at once: compare where no image arrived in the last 2 ticks."""
+    the offline tracker at once: compare where no image arrived in the last 2 ticks
+    (samples from the ``first`` reading on)."""
     arrivals = run.image_arrival_times_s
     settled = np.array([not np.any((arrivals > t - 2.5 * H) & (arrivals <= t))
-                        for t in run.reading_times_s + 0.6 * H])
+                        for t in run.reading_times_s[first:] + 0.6 * H])
     assert settled.sum() > 0.5 * len(settled)
     difference = np.abs(np.array(diagram)[settled] - np.array(offline)[settled])
     assert np.max(difference) <= 1e-9, np.max(difference)

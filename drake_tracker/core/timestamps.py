@@ -78,6 +78,10 @@ class StampDecision:
     #: The shift (s) added to this stream's stamps from now on, when this stamp
     #: re-anchored the stream; else None.
     reanchored_by_s: float | None = None
+    #: True when this stamp restarted the stream's time base: the few stamps accepted
+    #: before it (fewer than ``reanchor_after_samples``, e.g. a glitched first stamp)
+    #: were the outliers, and what was built on them should restart too.
+    restarted: bool = False
 
 
 class StreamClock:
@@ -103,6 +107,7 @@ class StreamClock:
         self._run_first_raw = 0.0
         self._run_last_raw = 0.0
         self._lags: deque[float] = deque(maxlen=RECENT_GAPS)
+        self._accepted = 0
         self._lag_run_count = 0
         self._lag_run_first = 0.0
 
@@ -184,6 +189,7 @@ class StreamClock:
             self._gaps.append(t - self.latest_s)
         self.latest_s = t if self.latest_s is None else max(self.latest_s, t)
         self._run_count = 0
+        self._accepted += 1
         return StampDecision(t, reanchored_by_s=reanchored_by)
 
     def _rejected(self, raw: float, problem: str, kind: str) -> StampDecision:
@@ -197,6 +203,11 @@ class StreamClock:
         self._run_last_raw = raw
         if self._run_count < self.params.reanchor_after_samples:
             return StampDecision(None, problem, kind)
+        if self._accepted < self.params.reanchor_after_samples:
+            # Fewer stamps than this run were accepted before it: they were the outliers.
+            self.latest_s, self._accepted = None, 0
+            self._gaps.clear()
+            return StampDecision(self._accept(raw).time_s, restarted=True)
         new_offset = self.latest_s + self.recent_period_s - self._run_first_raw
         shift = new_offset - self.offset_s
         self.offset_s, self.last_shift_s = new_offset, shift
@@ -221,6 +232,9 @@ class ReadingGate:
         self.last_raw_s = float("nan")
         self.gap_start_s: float | None = None
         self.gap_readings = 0
+        #: Whether the latest admitted reading restarted the time base
+        #: (``StampDecision.restarted``): the caller restarts its belief from it.
+        self.restarted = False
 
     def is_new(self, raw_s: float) -> bool:
         """Whether a stamp held on a port is a new sample (differs from the last seen)."""
@@ -228,7 +242,9 @@ class ReadingGate:
         return not (raw == self.last_raw_s or (np.isnan(raw) and np.isnan(self.last_raw_s)))
 
     def admit(self, raw_s: float, values: np.ndarray) -> float | None:
+        """The reading's time in the tracker's time base, or None (skipped, logged)."""
         self.last_raw_s = float(raw_s)
+        self.restarted = False
         bad = ~np.isfinite(values)
         if np.any(bad):
             if self.gap_start_s is None:
@@ -245,6 +261,11 @@ class ReadingGate:
         if decision.time_s is None:
             self.warnings.warn(decision.kind, f"joint reading skipped: {decision.problem}")
             return None
+        self.restarted = decision.restarted
+        if decision.restarted and self.logger:
+            self.logger.warning("joint reading clock restarted at %.4f s: the few stamps "
+                                "accepted before were not followed by the stream; the "
+                                "estimate restarts from this reading", raw_s)
         if self.gap_start_s is not None:
             if self.logger:
                 self.logger.info("joint readings finite again at %.4f s after %d skipped "

@@ -127,6 +127,8 @@ class DelayBufferSystem(LeafSystem):
             reading = np.array(self.get_input_port(0).Eval(context), float)
             t = s.readings.admit(raw, reading)
             if t is not None and self._params.use_joint_readings:
+                if s.readings.restarted:
+                    s.buffer = None  # built on outlier stamps: restart from this reading
                 if s.buffer is None:
                     s.buffer = new_belief_buffer(self._model, self._params, t, reading)
                 s.buffer.add_reading(t, full_reading(self._model, reading))

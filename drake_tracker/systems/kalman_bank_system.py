@@ -119,6 +119,8 @@ class JointKalmanBankSystem(LeafSystem):
         if self._params.use_joint_readings and gate.is_new(raw):
             reading = np.array(self.get_input_port(0).Eval(context), float)
             t = gate.admit(raw, reading)
+            if t is not None and gate.restarted:  # restart from this reading
+                started, last_reading = False, -np.inf
             if t is not None and t > last_reading:
                 if not started:
                     _, belief = make_bank_and_prior(self._model, self._params, reading)
