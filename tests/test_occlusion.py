@@ -69,7 +69,44 @@ def test_an_occluded_image_is_not_dragged_away_and_tightens_the_estimate_far_les
     before = clear_runs[0][1]
     assert before > 30.0
     assert all(after < 0.2 * before for _, _, after, _ in clear_runs)  # corrected
-    assert np.median([after for _, _, after, _ in occluded_runs]) < 1.5 * before
+    # Never dragged away (with o = 0.9 on the hidden pixels: 16-113 mm, median 44; now
+    # 38-42 mm from 42), and well under half of the clear image's information (8-12 nats
+    # against 26-27).
+    assert all(after < before for _, _, after, _ in occluded_runs)
     gain_clear = np.mean([gain for gain, _, _, _ in clear_runs])
     assert np.mean([gain for gain, _, _, _ in occluded_runs]) < 0.5 * gain_clear
     assert all(seen.occluded > 0.6 for _, _, _, seen in occluded_runs)  # and says so
+
+
+def _grow_naive(seed, depth, allowed, max_step, steps):
+    """Breadth-first growth, pixel by pixel: the reference for ``grow_surface``."""
+    h, w = seed.shape
+    mask = seed.copy()
+    frontier = [tuple(p) for p in np.argwhere(seed)]
+    for _ in range(steps):
+        nxt = []
+        for i, j in frontier:
+            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                a, b = i + di, j + dj
+                if (0 <= a < h and 0 <= b < w and not mask[a, b] and allowed[a, b]
+                        and np.isfinite(depth[a, b])
+                        and abs(depth[a, b] - depth[i, j]) < max_step):
+                    mask[a, b] = True
+                    nxt.append((a, b))
+        frontier = nxt
+    return mask
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_grow_surface_equals_a_breadth_first_reference(seed):
+    from drake_tracker.core.occlusion import grow_surface
+
+    rng = np.random.default_rng(seed)
+    depth = np.round(rng.uniform(0.4, 0.6, (12, 17)), 2)  # steps of 0.01-0.2 m
+    depth[rng.random(depth.shape) < 0.1] = np.nan
+    seed_mask = rng.random(depth.shape) < 0.05
+    allowed = rng.random(depth.shape) < 0.8
+    for steps in (0, 1, 3, 20):
+        expected = _grow_naive(seed_mask, depth, allowed, 0.05, steps)
+        np.testing.assert_array_equal(grow_surface(seed_mask, depth, allowed, 0.05, steps),
+                                      expected)
