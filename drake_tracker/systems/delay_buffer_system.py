@@ -104,27 +104,33 @@ class DelayBufferSystem(LeafSystem):
         self._state = self.DeclareAbstractState(AbstractValue.Make(DelayBufferState(
             readings=ReadingGate(stamps, model.robot_joint_names, log),
             image_clock=StreamClock("image", stamps, params.buffer_horizon_s))))
-        self.DeclareVectorInputPort("measured_position", len(model.robot_joint_names))
-        self.DeclareVectorInputPort("measurement_time", 1)
-        self.DeclareAbstractInputPort("image_observation",
-                                      AbstractValue.Make(ImageObservationMessage()))
-        self.DeclareAbstractInputPort("depth_frame", AbstractValue.Make(DepthFrame.empty()))
+        self._reading_port = self.DeclareVectorInputPort(
+            "measured_position", len(model.robot_joint_names))
+        self._time_port = self.DeclareVectorInputPort("measurement_time", 1)
+        self._observation_port = self.DeclareAbstractInputPort(
+            "image_observation", AbstractValue.Make(ImageObservationMessage()))
+        self._frame_port = self.DeclareAbstractInputPort(
+            "depth_frame", AbstractValue.Make(DepthFrame.empty()))
         state_ticket = {self.abstract_state_ticket(self._state)}
         self.DeclareAbstractOutputPort(
             "correction", lambda: AbstractValue.Make(BeliefCorrection()),
             self._calc_correction, state_ticket)
         self.DeclareAbstractOutputPort(
             "image_prior", lambda: AbstractValue.Make(ImagePrior()), self._calc_prior,
-            state_ticket | {self.input_port_ticket(self.get_input_port(3).get_index())})
+            state_ticket | {self._frame_port.ticket()})
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
 
+    def state(self, context) -> DelayBufferState:
+        """The buffer, its clocks and the latest correction, in ``context``."""
+        return context.get_abstract_state(self._state).get_value()
+
     def _update(self, context, state):
-        s: DelayBufferState = state.get_mutable_abstract_state(int(self._state)).get_value()
+        s: DelayBufferState = state.get_mutable_abstract_state(self._state).get_value()
         # Frames are judged against the buffer the CPF system saw (before this reading).
-        self._judge_frame(self.get_input_port(3).Eval(context), s)
-        raw = float(self.get_input_port(1).Eval(context)[0])
+        self._judge_frame(self._frame_port.Eval(context), s)
+        raw = float(self._time_port.Eval(context)[0])
         if s.readings.is_new(raw):
-            reading = np.array(self.get_input_port(0).Eval(context), float)
+            reading = np.array(self._reading_port.Eval(context), float)
             t = s.readings.admit(raw, reading)
             if t is not None and self._params.use_joint_readings:
                 if s.readings.restarted:
@@ -138,7 +144,7 @@ class DelayBufferSystem(LeafSystem):
                     s.buffer = new_belief_buffer(self._model, self._params, 0.0, None)
                 s.buffer.advance_to(t)
                 s.last_reading_time_s = t
-        message = self.get_input_port(2).Eval(context)
+        message = self._observation_port.Eval(context)
         if message.id > s.last_observation_id and message.observation is not None:
             s.last_observation_id = message.id
             problem = s.buffer.image_time_problem(message.anchor.anchor_time_s) \
@@ -150,7 +156,7 @@ class DelayBufferSystem(LeafSystem):
                 now, belief = s.buffer.present()
                 s.correction = BeliefCorrection(s.correction.id + 1, now,
                                                 s.last_reading_time_s, belief)
-        state.get_mutable_abstract_state(int(self._state)).set_value(s)
+        state.get_mutable_abstract_state(self._state).set_value(s)
 
     def _judge_frame(self, frame: DepthFrame, s: DelayBufferState) -> None:
         """Runs a new frame's stamp through the images' clock (once per frame)."""
@@ -165,11 +171,11 @@ class DelayBufferSystem(LeafSystem):
                           s.readings.clock)
 
     def _calc_correction(self, context, output):
-        output.set_value(context.get_abstract_state(int(self._state)).get_value().correction)
+        output.set_value(self.state(context).correction)
 
     def _calc_prior(self, context, output):
-        s: DelayBufferState = context.get_abstract_state(int(self._state)).get_value()
-        frame: DepthFrame = self.get_input_port(3).Eval(context)
+        s = self.state(context)
+        frame: DepthFrame = self._frame_port.Eval(context)
         if frame.is_empty:
             output.set_value(ImagePrior())
             return

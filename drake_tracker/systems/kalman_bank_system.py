@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -16,6 +18,22 @@ from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
 
 log = logging.getLogger(__name__)
+
+
+@dataclass
+class KalmanBankState:
+    """The bank system's bookkeeping (its abstract state); the belief itself is the
+    discrete state ``belief``. ``time_s``/``last_reading_s`` are None before the first
+    reading; ``correction_id`` is the latest delay-buffer correction adopted."""
+
+    gate: ReadingGate
+    time_s: float | None = None
+    last_reading_s: float | None = None
+    correction_id: int = 0
+
+    def __deepcopy__(self, memo) -> KalmanBankState:
+        return KalmanBankState(copy.deepcopy(self.gate, memo), self.time_s,
+                               self.last_reading_s, self.correction_id)
 
 
 class JointKalmanBankSystem(LeafSystem):
@@ -50,9 +68,9 @@ class JointKalmanBankSystem(LeafSystem):
     estimated camera in the model's world (RigidTransform). Before the first reading the
     estimate is the model's zero configuration.
 
-    Discrete state: [belief (5n), belief time, last reading time, correction id,
-    started flag]; abstract state: the readings' :class:`ReadingGate`. Readings the
-    delay buffer skips are skipped here too (the buffer logs them).
+    Discrete state ``belief``: the (5, n) moments, row-major (:meth:`belief`); abstract
+    state: :class:`KalmanBankState` (:meth:`bookkeeping`). Readings the delay buffer
+    skips are skipped here too (the buffer logs them).
     """
 
     def __init__(self, model, params: TrackerParams, period_s: float, offset_s: float = 0.0):
@@ -66,16 +84,14 @@ class JointKalmanBankSystem(LeafSystem):
         self._bank, _ = make_bank_and_prior(model, params, None)
         self._readout = PoseReadout(model)
         n = self._n
-        x0 = np.zeros(5 * n + 4)
-        x0[5 * n] = np.nan
-        x0[5 * n + 1] = -np.inf
-        self._state = self.DeclareDiscreteState(x0)
-        self._gate = self.DeclareAbstractState(AbstractValue.Make(
-            ReadingGate(params.timestamps, model.robot_joint_names, logger=None)))
-        self.DeclareVectorInputPort("measured_position", self._robot_n)
-        self.DeclareVectorInputPort("measurement_time", 1)
-        self.DeclareAbstractInputPort("correction", AbstractValue.Make(BeliefCorrection()))
-        deps = {self.discrete_state_ticket(self._state)}
+        self._belief = self.DeclareDiscreteState(np.zeros(5 * n))
+        self._bookkeeping = self.DeclareAbstractState(AbstractValue.Make(KalmanBankState(
+            ReadingGate(params.timestamps, model.robot_joint_names, logger=None))))
+        self._reading_port = self.DeclareVectorInputPort("measured_position", self._robot_n)
+        self._time_port = self.DeclareVectorInputPort("measurement_time", 1)
+        self._correction_port = self.DeclareAbstractInputPort(
+            "correction", AbstractValue.Make(BeliefCorrection()))
+        deps = {self.discrete_state_ticket(self._belief)}
         self.DeclareVectorOutputPort("belief", 5 * n, self._calc_belief, deps)
         self.DeclareVectorOutputPort("estimated_position", n,
                                      lambda c, o: self._row(c, o, MEAN_A), deps)
@@ -94,55 +110,56 @@ class JointKalmanBankSystem(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
 
     # ----------------------------------------------------------------- state access
-    def _unpack(self, context):
-        x = context.get_discrete_state(self._state).get_value()
-        n = self._n
-        return (x[:5 * n].reshape(5, n), x[5 * n], x[5 * n + 1], int(x[5 * n + 2]),
-                bool(x[5 * n + 3]))
+    def belief(self, context) -> np.ndarray:
+        """The (5, n) belief in ``context`` (the model's zero configuration before the
+        first reading)."""
+        return context.get_discrete_state(self._belief).get_value().reshape(5, self._n)
 
-    def _pack(self, belief, time_s, last_reading_s, correction_id, started):
-        return np.concatenate([np.asarray(belief, float).ravel(),
-                               [time_s, last_reading_s, correction_id, float(started)]])
+    def bookkeeping(self, context) -> KalmanBankState:
+        return context.get_abstract_state(self._bookkeeping).get_value()
 
     def _update(self, context, state):
-        belief, time_s, last_reading, correction_id, started = self._unpack(context)
-        belief = belief.copy()
-        correction = self.get_input_port(2).Eval(context)
-        if correction.id > correction_id and correction.belief is not None:
+        belief = self.belief(context).copy()
+        s: KalmanBankState = copy.deepcopy(self.bookkeeping(context))
+        correction = self._correction_port.Eval(context)
+        if correction.id > s.correction_id and correction.belief is not None:
             belief = correction.belief.copy()
-            time_s = correction.time_s
-            last_reading = correction.last_reading_time_s
-            correction_id = correction.id
-            started = True
-        raw = float(self.get_input_port(1).Eval(context)[0])
-        gate: ReadingGate = state.get_mutable_abstract_state(self._gate).get_value()
-        if self._params.use_joint_readings and gate.is_new(raw):
-            reading = np.array(self.get_input_port(0).Eval(context), float)
-            t = gate.admit(raw, reading)
-            if t is not None and gate.restarted:  # restart from this reading
-                started, last_reading = False, -np.inf
-            if t is not None and t > last_reading:
-                if not started:
-                    _, belief = make_bank_and_prior(self._model, self._params, reading)
-                    time_s, started = t, True
-                belief = self._bank.step_unchecked(belief, t - time_s,
-                                                   full_reading(self._model, reading))
-                time_s = t
-                last_reading = t
-        state.get_mutable_discrete_state(self._state).SetFromVector(
-            self._pack(belief, time_s, last_reading, correction_id, started))
-        state.get_mutable_abstract_state(self._gate).set_value(gate)
+            s.time_s, s.last_reading_s = correction.time_s, correction.last_reading_time_s
+            s.correction_id = correction.id
+        raw = float(self._time_port.Eval(context)[0])
+        if self._params.use_joint_readings and s.gate.is_new(raw):
+            reading = np.array(self._reading_port.Eval(context), float)
+            belief = self._filter(s, s.gate.admit(raw, reading), reading, belief)
+        state.get_mutable_discrete_state(self._belief).SetFromVector(belief.ravel())
+        state.get_mutable_abstract_state(self._bookkeeping).set_value(s)
+
+    def _filter(self, s: KalmanBankState, t: float | None, reading: np.ndarray,
+                belief: np.ndarray) -> np.ndarray:
+        """The belief after an admitted reading at ``t`` (None: rejected by the gate)."""
+        if t is None:
+            return belief
+        if s.gate.restarted:  # the clock restarted: start again from this reading
+            s.time_s = s.last_reading_s = None
+        if s.last_reading_s is not None and t <= s.last_reading_s:
+            return belief
+        if s.time_s is None:
+            _, belief = make_bank_and_prior(self._model, self._params, reading)
+            s.time_s = t
+        belief = self._bank.step_unchecked(belief, t - s.time_s,
+                                           full_reading(self._model, reading))
+        s.time_s = s.last_reading_s = t
+        return belief
 
     # ----------------------------------------------------------------- outputs
     def _calc_belief(self, context, output: BasicVector):
-        output.SetFromVector(self._unpack(context)[0].ravel())
+        output.SetFromVector(self.belief(context).ravel())
 
     def _row(self, context, output: BasicVector, row: int):
-        output.SetFromVector(self._unpack(context)[0][row])
+        output.SetFromVector(self.belief(context)[row])
 
     def _calc_offset(self, context, output: BasicVector):
-        output.SetFromVector(self._unpack(context)[0][MEAN_A, self._model.virtual_joint_indices])
+        output.SetFromVector(self.belief(context)[MEAN_A, self._model.virtual_joint_indices])
 
     def _calc_pose(self, context, output, which: int):
-        X = self._readout.poses(self._unpack(context)[0][MEAN_A])[which][0]
+        X = self._readout.poses(self.belief(context)[MEAN_A])[which][0]
         output.set_value(RigidTransform(X))

@@ -34,13 +34,14 @@ class DepthFrameToPointCloud(LeafSystem):
         # Pixel (i, j) looks through u = i + 0.5, v = j + 0.5 (see CameraIntrinsics).
         self._ray_x = (u + 0.5 - small.cx) / small.fx
         self._ray_y = (v + 0.5 - small.cy) / small.fy
-        self.DeclareAbstractInputPort("depth_frame", AbstractValue.Make(DepthFrame.empty()))
+        self._frame_port = self.DeclareAbstractInputPort(
+            "depth_frame", AbstractValue.Make(DepthFrame.empty()))
         self.DeclareAbstractOutputPort("point_cloud",
                                        lambda: AbstractValue.Make(PointCloud(0)),
                                        self._calc)
 
     def _calc(self, context, output):
-        frame: DepthFrame = self.get_input_port(0).Eval(context)
+        frame: DepthFrame = self._frame_port.Eval(context)
         if frame.is_empty:
             output.set_value(PointCloud(0))
             return
