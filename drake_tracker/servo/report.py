@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_tracker.demo import start_meshcat
 from drake_tracker.params import TrackerParams
 from drake_tracker.servo.config import (
     FEEDBACK_LABELS,
@@ -87,24 +88,6 @@ def write_error_csv(runs: dict[str, ServoRun], config: ServoStudyConfig, path: P
     return path
 
 
-def _start_meshcat():
-    """A Meshcat server on localhost at a free port (its URL is printed by the caller)."""
-    import logging
-
-    from pydrake.geometry import Meshcat, MeshcatParams
-
-    meshcat_params = MeshcatParams()
-    meshcat_params.host = "localhost"
-    meshcat_params.port = 0  # a free port
-    logger = logging.getLogger("drake")
-    level = logger.level
-    logger.setLevel(logging.WARNING)
-    try:
-        return Meshcat(meshcat_params)
-    finally:
-        logger.setLevel(level)
-
-
 def run_servo_study(config: ServoStudyConfig, out: Path, params: TrackerParams | None = None,
                     feedbacks: tuple[str, ...] = FEEDBACKS, duration_s: float | None = None,
                     with_meshcat: bool = True, progress: bool = True) -> dict:
@@ -116,7 +99,7 @@ def run_servo_study(config: ServoStudyConfig, out: Path, params: TrackerParams |
     scenario = servo_scenario(config)
     view = None
     if with_meshcat:
-        view = ServoMeshcatView(_start_meshcat(), config)
+        view = ServoMeshcatView(start_meshcat(), config)
         print(f"live view: {view.meshcat.web_url()} ({out}/meshcat.html keeps the "
               "recording)", flush=True)
         view.start_recording()

@@ -58,7 +58,7 @@ from drake_tracker.sim.reference import offset_gain_matrix, position_joint_names
 from drake_tracker.sim.trajectories import make_joint_trajectory
 from drake_tracker.sim.truth import TruthSystem
 from drake_tracker.sim.validation import require
-from drake_tracker.sim.world import resolved_biased_joints
+from drake_tracker.sim.world import add_truth_and_encoders
 
 
 def arm_joint_names(config: RobotConfig, robot_joint_names: list[str]) -> list[str]:
@@ -206,14 +206,8 @@ def AddServoWorld(builder: DiagramBuilder, scenario: Scenario,
                  OccluderMotion(plant, scenario_occluders(scenario), instance, camera_frame,
                                 ee_frame), positions, name=f"{name}_occluders")
 
-    truth = builder.AddNamedSystem(f"{name}_truth",
-                                   TruthSystem(plant, robot_names, camera_frame, ee_frame))
-    builder.Connect(positions, truth.get_input_port(0))
-    encoders = builder.AddNamedSystem(
-        f"{name}_encoders",
-        BiasedEncoders(robot_names, scenario.encoders, scenario.seed,
-                       resolved_biased_joints(scenario, robot_names)))
-    builder.Connect(truth.GetOutputPort("true_position"), encoders.get_input_port(0))
+    truth, encoders = add_truth_and_encoders(builder, plant, positions, scenario, robot_names,
+                                             camera_frame, ee_frame, name)
     builder.Connect(encoders.GetOutputPort("bias"), reference.GetInputPort("encoder_bias"))
     ports = {
         "true_position": truth.GetOutputPort("true_position"),

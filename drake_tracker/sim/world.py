@@ -204,14 +204,8 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
                                ee_frame)
     AddOccluders(builder, scene_graph, occluders, positions, name=f"{name}_occluders")
 
-    truth = builder.AddNamedSystem(f"{name}_truth",
-                                   TruthSystem(plant, robot_names, camera_frame, ee_frame))
-    builder.Connect(positions, truth.get_input_port(0))
-    encoders = builder.AddNamedSystem(
-        f"{name}_encoders",
-        BiasedEncoders(robot_names, scenario.encoders, scenario.seed,
-                       resolved_biased_joints(scenario, robot_names)))
-    builder.Connect(truth.GetOutputPort("true_position"), encoders.get_input_port(0))
+    truth, encoders = add_truth_and_encoders(builder, plant, positions, scenario, robot_names,
+                                             camera_frame, ee_frame, name)
     camera_body = plant.GetBodyByName(camera_frame.body().name())
     _, camera = AddDepthCamera(builder, scene_graph,
                                plant.GetBodyFrameIdOrThrow(camera_body.index()),
@@ -247,3 +241,19 @@ def build_simulated_world(scenario: Scenario) -> tuple[Diagram, SimulatedWorld]:
     diagram = builder.Build()
     diagram.set_name("simulated_world")
     return diagram, world
+
+
+def add_truth_and_encoders(builder: DiagramBuilder, plant, positions, scenario: Scenario,
+                           robot_names: list[str], camera_frame, ee_frame, name: str
+                           ) -> tuple[TruthSystem, BiasedEncoders]:
+    """The ground truth of the plant's ``positions`` (joint angles, camera offset, hand in
+    the camera) and the biased encoders that read the true angles."""
+    truth = builder.AddNamedSystem(f"{name}_truth",
+                                   TruthSystem(plant, robot_names, camera_frame, ee_frame))
+    builder.Connect(positions, truth.GetInputPort("positions"))
+    encoders = builder.AddNamedSystem(
+        f"{name}_encoders",
+        BiasedEncoders(robot_names, scenario.encoders, scenario.seed,
+                       resolved_biased_joints(scenario, robot_names)))
+    builder.Connect(truth.GetOutputPort("true_position"), encoders.GetInputPort("true_position"))
+    return truth, encoders
