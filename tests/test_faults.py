@@ -16,7 +16,6 @@ from drake_tracker.core.image_update import RECENT_UPDATES, StageTimes
 from drake_tracker.core.pipeline import make_bank_and_prior
 from drake_tracker.offline import replay_run
 from drake_tracker.params import TrackerParams, validate_tracker_params
-from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.synthetic import synthetic_run
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
 from drake_tracker.systems.messages import ImagePrior
@@ -33,11 +32,6 @@ def test_the_per_update_timing_record_is_bounded():
 
 
 # ----------------------------------------------------------------- depth images
-@pytest.fixture(scope="module")
-def apollo():
-    return build_tracker_model(robot_preset("apollo"))
-
-
 @pytest.fixture(scope="module")
 def run(apollo):
     return synthetic_run(apollo, duration_s=0.3, encoder_rate_hz=200.0, seed=3)

@@ -16,7 +16,6 @@ from drake_tracker.core.health import (
 from drake_tracker.core.likelihood import LikelihoodParams
 from drake_tracker.metrics import pose_errors
 from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.synthetic import synthetic_run
 from drake_tracker.tracker import Tracker
 
@@ -91,11 +90,6 @@ def _track_step(apollo, run, params, step_s):
             estimate = tracker.estimate()
             errors.append((t, pose_errors(estimate.X_CE[None], run.truth_X_CE[j][None])[0][0]))
     return np.array(errors), lost_at
-
-
-@pytest.fixture(scope="module")
-def apollo():
-    return build_tracker_model(robot_preset("apollo"))
 
 
 @pytest.fixture(scope="module")

@@ -24,11 +24,6 @@ from drake_tracker.systems.recorded_run_source import RecordedRunSource
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 
 
-@pytest.fixture(scope="module")
-def apollo():
-    return build_tracker_model(robot_preset("apollo"))
-
-
 def params(seed: int = 0) -> TrackerParams:
     p = TrackerParams()
     p.image.num_particles = 40

@@ -15,18 +15,12 @@ from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.pipeline import full_reading, new_belief_buffer
 from drake_tracker.core.timestamps import RateLimitedWarning, StreamClock
 from drake_tracker.params import TimestampParams, TrackerParams, validate_tracker_params
-from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.synthetic import synthetic_run
 from drake_tracker.systems.add_tracker import AddTracker
 from drake_tracker.systems.recorded_run_source import RecordedRunSource
 from drake_tracker.tracker import Tracker
 
 H = 1.0 / 200.0  # the synthetic runs' encoder period (s)
-
-
-@pytest.fixture(scope="module")
-def apollo():
-    return build_tracker_model(robot_preset("apollo"))
 
 
 @pytest.fixture(scope="module")

@@ -27,11 +27,6 @@ CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 
 
 @pytest.fixture(scope="module")
-def apollo():
-    return build_tracker_model(robot_preset("apollo"))
-
-
-@pytest.fixture(scope="module")
 def arm6():
     return build_tracker_model(robot_preset("arm6"))
 
