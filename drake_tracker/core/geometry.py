@@ -40,10 +40,6 @@ class RobotMeshes:
     def num_triangles(self) -> int:
         return int(self.triangles.shape[0])
 
-    @property
-    def num_vertices(self) -> int:
-        return int(self.vertices.shape[0])
-
 
 # ----------------------------------------------------------------------------- shapes
 
