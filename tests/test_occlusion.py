@@ -99,7 +99,7 @@ def _grow_naive(seed, depth, allowed, max_step, steps):
 
 @pytest.mark.parametrize("seed", range(5))
 def test_grow_surface_equals_a_breadth_first_reference(seed):
-    from drake_tracker.core.occlusion import grow_surface
+    from drake_tracker.core.occlusion import grow_surface, surface_steps
 
     rng = np.random.default_rng(seed)
     depth = np.round(rng.uniform(0.4, 0.6, (12, 17)), 2)  # steps of 0.01-0.2 m
@@ -110,3 +110,7 @@ def test_grow_surface_equals_a_breadth_first_reference(seed):
         expected = _grow_naive(seed_mask, depth, allowed, 0.05, steps)
         np.testing.assert_array_equal(grow_surface(seed_mask, depth, allowed, 0.05, steps),
                                       expected)
+        if steps > 0:  # the pixels first reached at the last step
+            last = expected & ~_grow_naive(seed_mask, depth, allowed, 0.05, steps - 1)
+            np.testing.assert_array_equal(
+                surface_steps(seed_mask, depth, allowed, 0.05, steps) == steps, last)

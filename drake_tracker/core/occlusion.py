@@ -65,23 +65,22 @@ def pixel_occlusion(observation: PreparedObservation, rendered_m: np.ndarray,
                     image_fraction: float) -> np.ndarray:
     """(P,) occlusion probability of each valid pixel of ``observation``, given the robot
     rendered at the prior mean (H, W; inf where no robot)."""
-    d = np.asarray(rendered_m, float).ravel()[observation.pixel_index]
+    rendered_m = np.asarray(rendered_m, float)
+    d = rendered_m.ravel()[observation.pixel_index]
     hidden = np.isfinite(d) & (observation.z < d - 3.0 * observation.sigma)
     mask = np.zeros(int(np.prod(observation.shape)), bool)
     mask[observation.pixel_index] = hidden
     mask = mask.reshape(observation.shape)
-    outside = ~np.isfinite(np.asarray(rendered_m, float))
+    outside = ~np.isfinite(rendered_m)
     image = observed_image(observation)
-    grown = grow_surface(mask, image, outside, OCCLUDER_SURFACE_STEP_M, OCCLUDER_GROWTH_PX)
-    # The surfaces that reached OCCLUDER_GROWTH_PX out: pixels that one more step inwards
-    # cannot all explain, traced back through the grown mask.
-    inner = grow_surface(mask, image, outside, OCCLUDER_SURFACE_STEP_M,
-                         OCCLUDER_GROWTH_PX - 1)
-    occluder = grow_surface(grown & ~inner, image, grown, np.inf, grown.size)
-    hidden_image = mask.ravel()[observation.pixel_index]
+    steps = surface_steps(mask, image, outside, OCCLUDER_SURFACE_STEP_M, OCCLUDER_GROWTH_PX)
+    grown = steps >= 0
+    # The surfaces that reached OCCLUDER_GROWTH_PX out, traced back through the grown mask.
+    far = steps == OCCLUDER_GROWTH_PX
+    occluder = grow_surface(far, image, grown, np.inf, grown.size)
     occluder = occluder.ravel()[observation.pixel_index]
     return np.where(occluder, OCCLUDED_PIXEL_PROBABILITY,
-                    np.where(hidden_image, NEAR_PIXEL_OCCLUSION_PROBABILITY, image_fraction))
+                    np.where(hidden, NEAR_PIXEL_OCCLUSION_PROBABILITY, image_fraction))
 
 
 def grow_surface(seed: np.ndarray, depth_m: np.ndarray, allowed: np.ndarray,
@@ -89,10 +88,18 @@ def grow_surface(seed: np.ndarray, depth_m: np.ndarray, allowed: np.ndarray,
     """``seed`` (H, W bool) grown ``steps`` times into 4-neighbours that are ``allowed``,
     valid in ``depth_m`` (NaN: invalid) and within ``max_step_m`` of the neighbour they
     are reached from: the rest of a surface that the seed pixels lie on."""
+    return surface_steps(seed, depth_m, allowed, max_step_m, steps) >= 0
+
+
+def surface_steps(seed: np.ndarray, depth_m: np.ndarray, allowed: np.ndarray,
+                  max_step_m: float, steps: int) -> np.ndarray:
+    """(H, W) int: the growth step at which :func:`grow_surface` reaches each pixel (0 for
+    the seed, -1 where it does not)."""
     mask = np.asarray(seed, bool).copy()
+    reached = np.where(mask, 0, -1)
     z = np.where(np.isfinite(depth_m), depth_m, np.inf)
     open_ = np.asarray(allowed, bool) & np.isfinite(z)
-    for _ in range(steps):
+    for step in range(1, steps + 1):
         added = np.zeros_like(mask)
         for axis, shift in ((0, 1), (0, -1), (1, 1), (1, -1)):
             from_mask = np.roll(mask, shift, axis)
@@ -106,7 +113,8 @@ def grow_surface(seed: np.ndarray, depth_m: np.ndarray, allowed: np.ndarray,
         if not added.any():
             break
         mask |= added
-    return mask
+        reached[added] = step
+    return reached
 
 
 def with_pixel_occlusion(observation: PreparedObservation,
