@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import logging
 from dataclasses import dataclass
 
@@ -30,10 +29,6 @@ class KalmanBankState:
     time_s: float | None = None
     last_reading_s: float | None = None
     correction_id: int = 0
-
-    def __deepcopy__(self, memo) -> KalmanBankState:
-        return KalmanBankState(copy.deepcopy(self.gate, memo), self.time_s,
-                               self.last_reading_s, self.correction_id)
 
 
 class JointKalmanBankSystem(LeafSystem):
@@ -120,7 +115,8 @@ class JointKalmanBankSystem(LeafSystem):
 
     def _update(self, context, state):
         belief = self.belief(context).copy()
-        s: KalmanBankState = copy.deepcopy(self.bookkeeping(context))
+        # ``state`` is already the update's own copy of the context's state.
+        s: KalmanBankState = state.get_mutable_abstract_state(self._bookkeeping).get_value()
         correction = self._correction_port.Eval(context)
         if correction.id > s.correction_id and correction.belief is not None:
             belief = correction.belief.copy()
