@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from fast_params import small_params
 from pydrake.systems.analysis import Simulator
 
 from drake_tracker.core.belief_buffer import ImageAnchor
@@ -35,14 +36,6 @@ def test_the_per_update_timing_record_is_bounded():
 @pytest.fixture(scope="module")
 def run(apollo):
     return synthetic_run(apollo, duration_s=0.3, encoder_rate_hz=200.0, seed=3)
-
-
-def small_params() -> TrackerParams:
-    p = TrackerParams()
-    p.image.num_particles = 20
-    p.image.annealing_betas = [0.1, 1.0]
-    p.image.min_image_interval_s = 0.0
-    return p
 
 
 def started_tracker(apollo, run) -> Tracker:

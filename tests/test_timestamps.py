@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from fast_params import small_params
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
@@ -26,14 +27,6 @@ H = 1.0 / 200.0  # the synthetic runs' encoder period (s)
 @pytest.fixture(scope="module")
 def run(apollo):
     return synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7)
-
-
-def small_params() -> TrackerParams:
-    p = TrackerParams()
-    p.image.num_particles = 20
-    p.image.annealing_betas = [0.1, 1.0]
-    p.image.min_image_interval_s = 0.0
-    return p
 
 
 # ----------------------------------------------------------------- the policy itself

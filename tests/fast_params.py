@@ -1,0 +1,13 @@
+"""Tracker parameters that keep unit tests fast (shared by the test modules)."""
+
+from drake_tracker.params import TrackerParams
+
+
+def small_params() -> TrackerParams:
+    """Few particles, two sweeps, every image processed: cheap image updates whose
+    decisions (applied, skipped, warned) are those of the defaults."""
+    p = TrackerParams()
+    p.image.num_particles = 20
+    p.image.annealing_betas = [0.1, 1.0]
+    p.image.min_image_interval_s = 0.0
+    return p
