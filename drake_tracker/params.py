@@ -195,16 +195,25 @@ def load_tracker_params(path: str | Path | None = None) -> TrackerParams:
     params = TrackerParams()
     if path is None:
         return params
-    from pydrake.common.yaml import yaml_load_typed
+    from pydrake.common.yaml import yaml_load, yaml_load_typed
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"tracker parameter file '{path}' does not exist")
+    from drake_tracker.yaml_fields import mismatched_field
+
+    raw = None
     try:
-        params = yaml_load_typed(filename=str(path), defaults=params)
+        raw = yaml_load(filename=str(path))
+        if raw is not None:  # an empty file: all defaults
+            params = yaml_load_typed(filename=str(path), defaults=params)
     except (RuntimeError, AssertionError, TypeError, ValueError) as err:
-        raise ValueError(f"{path}: cannot read tracker parameters: {err}") from err
-    validate_tracker_params(params)
+        raise ValueError(f"{path}: cannot read tracker parameters: "
+                         f"{mismatched_field(raw, params) or err}") from err
+    try:
+        validate_tracker_params(params)
+    except ValueError as err:
+        raise ValueError(f"{path}: {err}") from err
     return params
 
 
@@ -278,6 +287,9 @@ def validate_tracker_params(params: TrackerParams) -> None:
            "must be 'batched' or 'drake'")
     _check(0 < im.near_m < im.far_m, "image.near_m/far_m", (im.near_m, im.far_m),
            "need 0 < near_m < far_m")
+    for name, value in vars(im.likelihood).items():
+        if isinstance(value, float):
+            _check(math.isfinite(value), f"image.likelihood.{name}", value, "must be finite")
     im.likelihood.validate()
     params.health.validate()
     _check(im.seed >= 0 and int(im.seed) == im.seed, "image.seed", im.seed,

@@ -29,6 +29,7 @@ the intrinsics are those of the stored images.
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -121,6 +122,21 @@ class RecordedRun:
 
     @staticmethod
     def load(path: str | Path) -> RecordedRun:
+        """Reads a run written by :meth:`save`; a file that is not one raises ValueError
+        naming it (FileNotFoundError when there is none)."""
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"recorded run '{path}' does not exist")
+        if not zipfile.is_zipfile(path):  # numpy would try it as a pickle
+            raise ValueError(f"{path}: not a recorded run: not a .npz (zip) archive, or a "
+                             f"truncated one")
+        try:
+            return RecordedRun._load(path)
+        except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as err:
+            raise ValueError(f"{path}: not a readable recorded run (a .npz written by "
+                             f"drake-tracker record): {type(err).__name__}: {err}") from err
+
+    @staticmethod
+    def _load(path: str | Path) -> RecordedRun:
         with np.load(path, allow_pickle=False) as data:
             version = int(data["format_version"])
             if version != FORMAT_VERSION:

@@ -15,6 +15,7 @@ The Drake systems in ``drake_tracker.systems`` call the same pieces
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
 from drake_tracker.core.depth_units import check_depth_units
-from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.frames import DepthFrame, depth_to_metres
 from drake_tracker.core.health import TrackerHealth, next_health
 from drake_tracker.core.pipeline import (
     ImageProcessor,
@@ -111,7 +112,8 @@ class Tracker:
         self.buffer.add_reading(t, full_reading(self.model, reading))
 
     def add_image(self, frame: DepthFrame) -> bool:
-        """A depth image (full resolution of ``camera``); True when it was applied.
+        """A depth image (full resolution of ``camera``; float metres, or uint16
+        millimetres with 0 and 65535 for no return); True when it was applied.
 
         Images before the first reading, with a stamp the time-stamp policy rejects
         (``core/timestamps.py``), older than the buffer horizon, from the future, in a gap
@@ -122,6 +124,8 @@ class Tracker:
         """
         if self.images is None or frame.is_empty:
             return False
+        if np.asarray(frame.depth_m).dtype == np.uint16:  # a 16-bit camera's millimetres
+            frame = replace(frame, depth_m=depth_to_metres(frame.depth_m, "16U_mm"))
         self.images.update.prepare(frame.depth_m)  # validates before anything changes
         check_depth_units(frame.depth_m)
         if self.buffer is None:

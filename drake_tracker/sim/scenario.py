@@ -68,15 +68,27 @@ def load_scenario(name_or_path: str | Path, validate: bool = True) -> Scenario:
         raw = yaml_load(filename=str(path)) or {}
         if not isinstance(raw, dict):
             raise ValueError(f"{path}: a scenario YAML must be a mapping")
-        base = preset_scenario(raw["preset"]) if raw.get("preset") else Scenario()
+        if raw.get("preset") is not None and not isinstance(raw["preset"], str):
+            raise ValueError(f"{path}: preset: {raw['preset']!r} (expected a preset name, "
+                             f"e.g. 's-full-arm/constant')")
+        base = None
         try:
-            scenario = yaml_load_typed(filename=str(path), defaults=base)
-        except RuntimeError as err:
-            raise ValueError(f"{path}: {err}") from err
+            base = preset_scenario(raw["preset"]) if raw.get("preset") else Scenario()
+            # An empty file is the defaults (or its preset).
+            scenario = yaml_load_typed(filename=str(path), defaults=base) if raw else base
+        except (RuntimeError, AssertionError, TypeError, ValueError) as err:
+            from drake_tracker.yaml_fields import mismatched_field
+
+            raise ValueError(f"{path}: {mismatched_field(raw, base) or err}") from err
         if scenario.name == "custom" and not raw.get("name"):
             scenario.name = path.stem
-    else:
-        scenario = preset_scenario(text)
+        if validate:
+            try:
+                validate_scenario(scenario)
+            except ValueError as err:
+                raise ValueError(f"{path}: {err}") from err
+        return scenario
+    scenario = preset_scenario(text)
     if validate:
         validate_scenario(scenario)
     return scenario

@@ -107,8 +107,10 @@ class DepthImageToFrame(LeafSystem):
     Every ``period_s`` (from ``offset_s``) it reads ``image_time`` (1-vector, the
     capture time in s); a finite stamp different from the last one marks a new image,
     which is read, converted and given the next sequence number (0, 1, ...). Its
-    ``arrival_time_s`` is the update's time. A NaN stamp means "no image yet"; a stamp
-    older than the last one is skipped with a warning (the first and every 100th).
+    ``arrival_time_s`` is the update's time. A NaN stamp means "no image yet". An image
+    stamped before the previous one is passed on like any other: the tracker applies it
+    at its capture time while that is inside its buffer's horizon, and skips it with a
+    warning otherwise.
     """
 
     def __init__(self, encoding: str, period_s: float, offset_s: float = 0.0):
@@ -120,7 +122,6 @@ class DepthImageToFrame(LeafSystem):
             "depth_image", AbstractValue.Make(_image_type(encoding)()))
         self._time_input = self.DeclareVectorInputPort("image_time", 1)
         self._frame = self.DeclareAbstractState(AbstractValue.Make(DepthFrame.empty()))
-        self._stale_count = self.DeclareDiscreteState([0.0])
         self.DeclareStateOutputPort("depth_frame", self._frame)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._convert)
 
@@ -128,14 +129,6 @@ class DepthImageToFrame(LeafSystem):
         stamp = float(self._time_input.Eval(context)[0])
         last: DepthFrame = context.get_abstract_state(self._frame).get_value()
         if not np.isfinite(stamp) or stamp == last.capture_time_s:
-            return
-        if stamp < last.capture_time_s:
-            count = int(context.get_discrete_state(self._stale_count).GetAtIndex(0))
-            if count % 100 == 0:
-                log.warning("depth image stamped %.4f s skipped: older than the last one "
-                            "(%.4f s); %d such images so far", stamp, last.capture_time_s,
-                            count + 1)
-            state.get_mutable_discrete_state(self._stale_count).SetAtIndex(0, count + 1)
             return
         image = self._image_input.Eval(context)
         depth = depth_to_metres(np.asarray(image.data), self._encoding)

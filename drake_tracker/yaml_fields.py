@@ -1,0 +1,50 @@
+"""Which field of a YAML file does not fit its dataclass schema.
+
+``pydrake.common.yaml.yaml_load_typed`` names the field for most type errors, but not
+for a scalar where a list is expected (``annealing_betas: 0.5`` gives "'float' object
+is not iterable") nor for a string where a float is expected (``duration_s: long``
+gives "could not convert string to float"). :func:`mismatched_field` walks the raw
+YAML against the defaults to name it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+
+def _mismatch(value: Any, default: Any) -> str | None:
+    """Why ``value`` (raw YAML) cannot replace ``default``, or None when it may."""
+    if isinstance(default, bool):
+        return None if isinstance(value, bool) else "expected true or false"
+    if isinstance(default, (int, float)):
+        numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
+        return None if numeric else "expected a number"
+    if isinstance(default, str):
+        return None if isinstance(value, str) else "expected a string"
+    if isinstance(default, (list, tuple)):
+        return None if isinstance(value, list) else "expected a list"
+    if isinstance(default, dict) or dataclasses.is_dataclass(default):
+        return None if isinstance(value, dict) else "expected a mapping"
+    return None
+
+
+def mismatched_field(raw: Any, defaults: Any, prefix: str = "") -> str | None:
+    """``"field.path: value (why)"`` for the first field of ``raw`` (a YAML mapping) whose
+    value does not fit the matching field of ``defaults`` (a dataclass instance), or
+    None when none is found (unknown fields are left to ``yaml_load_typed``)."""
+    if not isinstance(raw, dict) or not dataclasses.is_dataclass(defaults):
+        return None
+    for key, value in raw.items():
+        if not hasattr(defaults, str(key)):
+            continue
+        default = getattr(defaults, str(key))
+        where = f"{prefix}{key}"
+        why = _mismatch(value, default)
+        if why is not None:
+            return f"{where}: {value!r} ({why})"
+        if dataclasses.is_dataclass(default):
+            found = mismatched_field(value, default, f"{where}.")
+            if found:
+                return found
+    return None

@@ -1,0 +1,93 @@
+"""Issue 14's remaining input findings: parameter and scenario files whose bad fields
+gave raw Python errors or failed later, an empty parameter file, a corrupt recording,
+and 16-bit millimetre depth images in the offline tracker."""
+
+import numpy as np
+import pytest
+from fast_params import small_params
+
+from drake_tracker.core.frames import DepthFrame, depth_to_metres
+from drake_tracker.params import TrackerParams, load_tracker_params, tracker_params_to_yaml
+from drake_tracker.recording import RecordedRun
+from drake_tracker.sim.scenario import load_scenario
+from drake_tracker.synthetic import synthetic_run
+from drake_tracker.tracker import Tracker
+
+
+def write(tmp_path, name: str, text: str):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("field", ["max_depth_m", "occluder_rate_per_m",
+                                   "depth_noise_std_m"])
+def test_an_infinite_likelihood_field_is_rejected_at_load_by_name(tmp_path, field):
+    """These loaded, then failed at the first image."""
+    path = write(tmp_path, "p.yaml", f"image:\n  likelihood:\n    {field}: .inf\n")
+    with pytest.raises(ValueError, match=rf"p\.yaml: image\.likelihood\.{field} = inf"):
+        load_tracker_params(path)
+
+
+def test_an_empty_parameter_file_gives_the_defaults(tmp_path):
+    for text in ("", "# only a comment\n"):
+        loaded = load_tracker_params(write(tmp_path, "empty.yaml", text))
+        assert tracker_params_to_yaml(loaded) == tracker_params_to_yaml(TrackerParams())
+
+
+@pytest.mark.parametrize("loader, text, message", [
+    (load_tracker_params, "image:\n  annealing_betas: 0.5\n",
+     "image.annealing_betas: 0.5 (expected a list)"),
+    (load_scenario, "duration_s: long\n", "duration_s: 'long' (expected a number)"),
+    (load_scenario, "preset: 3\n", "preset: 3 (expected a preset name"),
+    (load_scenario, "camera:\n  rate_hz: [30]\n", "camera.rate_hz: [30] (expected a number)"),
+    (load_scenario, "duration_s: -1.0\n", "Scenario.duration_s = -1.0"),
+])
+def test_a_bad_field_is_named_with_its_file(tmp_path, loader, text, message):
+    """These gave raw Python errors naming no field ("'float' object is not iterable",
+    "could not convert string to float", "'int' object has no attribute 'partition'")."""
+    path = write(tmp_path, "bad.yaml", text)
+    with pytest.raises(ValueError) as err:
+        loader(path)
+    assert str(err.value).startswith(f"{path}: ") and message in str(err.value)
+
+
+def test_an_empty_scenario_file_gives_the_default_scenario(tmp_path):
+    scenario = load_scenario(write(tmp_path, "mine.yaml", ""))
+    assert scenario.name == "mine" and scenario.duration_s > 0
+
+
+@pytest.fixture(scope="module")
+def run(apollo):
+    return synthetic_run(apollo, duration_s=0.3, encoder_rate_hz=200.0, seed=5)
+
+
+def test_a_corrupt_recording_is_a_clear_error_naming_the_file(tmp_path, run):
+    good = run.save(tmp_path / "good.npz")
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(good.read_bytes()[:3000])
+    text = write(tmp_path, "text.npz", "not an archive")
+    empty = tmp_path / "keys.npz"
+    np.savez(empty, format_version=np.array(1))
+    for path in (truncated, text, empty):
+        with pytest.raises(ValueError) as err:
+            RecordedRun.load(path)
+        assert str(err.value).startswith(f"{path}: not a") and "pickle" not in str(err.value)
+    assert len(RecordedRun.load(good).reading_times_s) == len(run.reading_times_s)
+
+
+def test_sixteen_bit_millimetre_images_are_read_as_metres(apollo, run):
+    """The Diagram's input took ImageDepth16U; the offline tracker raised on uint16."""
+    millimetres = np.round(run.depth_images_m[3] * 1000.0).astype(np.uint16)
+    millimetres[:5, :] = 0  # no return
+    millimetres[-3:, :] = 65535  # too far
+    metres = depth_to_metres(millimetres, "16U_mm")
+    assert np.isnan(metres[:5]).all() and np.isnan(metres[-3:]).all()
+    estimates = []
+    for image in (metres, millimetres):
+        tracker = Tracker(apollo, run.camera_intrinsics, small_params())
+        for t, reading in zip(run.reading_times_s, run.readings_rad, strict=True):
+            tracker.add_reading(t, reading)
+        assert tracker.add_image(DepthFrame(0.1, 0.15, image, 3))
+        estimates.append(tracker.estimate().positions)
+    np.testing.assert_array_equal(estimates[1], estimates[0])
