@@ -123,15 +123,45 @@ def test_culling_does_not_change_the_images(model):
     configurations spread widely enough to put parts out of view and near the camera."""
     from dataclasses import replace
 
-    from drake_tracker.core.rasterize import render_tables
+    from drake_tracker.core.mesh_parts import render_tables
 
     intrinsics = FULL.subsampled(8)
     culled = BatchedDepthRenderer(model, intrinsics)
     plain = BatchedDepthRenderer(model, intrinsics)
     tables = list(render_tables(replace(plain.meshes, triangle_closed=None),
                                  plain.kinematics.num_bodies))
-    tables[5] = np.full_like(tables[5], 1e6)  # bounding-sphere radii
+    tables[6] = np.full_like(tables[6], 1e6)  # bounding-sphere radii
     plain._tables = tuple(tables)
     q = random_configurations(model, 200, seed=11, spread_rad=1.0,
                               center=default_view_configuration(model))
     np.testing.assert_array_equal(culled.render(q), plain.render(q))
+
+
+def test_mesh_parts_partition_each_body_and_render_the_same_images(model):
+    """Every triangle is in exactly one part, of its own body, with at most the
+    requested number of triangles and a sphere that holds its vertices; the images do not
+    depend on how the bodies are split."""
+    from drake_tracker.core.mesh_parts import render_tables
+
+    renderer = BatchedDepthRenderer(model, FULL.subsampled(8))
+    meshes, nb = renderer.meshes, renderer.kinematics.num_bodies
+    vertices, triangles, part_body, v_start, t_start, centers, radii = \
+        render_tables(meshes, nb, max_triangles=7)[:7]
+    sizes = np.diff(t_start)
+    assert sizes.sum() == meshes.num_triangles and sizes.max() <= 7 and sizes.min() >= 1
+    corners = np.sort(vertices[triangles].reshape(-1, 9), axis=1)
+    source = np.sort(np.asarray(meshes.vertices)[meshes.triangles].reshape(-1, 9), axis=1)
+    np.testing.assert_array_equal(np.unique(corners, axis=0), np.unique(source, axis=0))
+    for p in range(len(part_body)):
+        tris = triangles[t_start[p]:t_start[p + 1]]
+        assert tris.min() >= v_start[p] and tris.max() < v_start[p + 1]
+        own = vertices[v_start[p]:v_start[p + 1]]
+        assert np.all(np.linalg.norm(own - centers[p], axis=1) <= radii[p])
+    assert np.bincount(part_body, sizes, nb).astype(int).tolist() == \
+        np.bincount(meshes.triangle_body, minlength=nb).tolist()
+    q = random_configurations(model, 50, seed=12, spread_rad=0.5,
+                              center=default_view_configuration(model))
+    reference = renderer.render(q)
+    for max_triangles in (1, 7, 10**9):
+        renderer._tables = render_tables(meshes, nb, max_triangles)
+        np.testing.assert_array_equal(renderer.render(q), reference)

@@ -1,6 +1,9 @@
 """The z-buffer triangle rasteriser shared by rendering and scoring (numba kernels).
 
-Per particle, a body whose bounding sphere is outside the view frustum is skipped, each
+The meshes come in parts: spatially compact groups of one body's triangles, each with
+its own bounding sphere (:mod:`drake_tracker.core.mesh_parts`). Per particle, a part
+whose sphere is outside the view frustum is skipped, and one wholly in front of the near
+plane takes the fast path (no clipping); each
 visible vertex is transformed and projected once, triangles of closed surfaces that face
 away from the camera are skipped (exact: the images are the same without it), and each
 triangle is scanned row by row over exactly the columns it covers. While rasterising,
@@ -18,16 +21,16 @@ import numpy as np
 from numba import njit, prange
 
 import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
-from drake_tracker.core.geometry import RobotMeshes
 
 
 @njit(cache=True, inline="always")
 def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span):
     """Rasterises one projected triangle (pixel coordinates u, v and inverse depths
-    1/z of its vertices, all in front of the near plane up to rounding) into zbuf,
-    keeping the minimum depth. 1/z is affine in screen space (perspective-correct).
-    ``rows`` (r_min, r_max) grows to cover the rows written, and ``span[r]`` (c_min,
-    c_max) the columns written in row r."""
+    1/z of its vertices, all in front of the near plane up to rounding) into ``zbuf``,
+    which holds inverse depths (0: nothing drawn), keeping the largest: the nearest
+    surface. 1/z is affine in screen space (perspective-correct), so a pixel costs one
+    multiply-add and a max, no division. ``rows`` (r_min, r_max) grows to cover the
+    rows written, and ``span[r]`` (c_min, c_max) the columns written in row r."""
     H, W = zbuf.shape
     umin = min(u0, min(u1, u2))
     umax = max(u0, max(u1, u2))
@@ -63,69 +66,68 @@ def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span):
     # triangles whose vertices were clipped exactly onto the near plane).
     iz_hi = (1.0 / near) * (1.0 + 1e-9)
     iz_lo = 1.0 / far
-    if r0 < rows[0]:
-        rows[0] = r0
-    if r1 > rows[1]:
-        rows[1] = r1
     # Per row, the exact run of columns where all three edge functions are >= eps, so
     # that the work per row is proportional to the pixels covered (long thin triangles
     # have bounding boxes far larger than themselves) and the inner loop has no edge
-    # tests. Edges with a_k == 0 constrain whole rows.
-    ia0 = 1.0 / a0 if a0 != 0.0 else 0.0
-    ia1 = 1.0 / a1 if a1 != 0.0 else 0.0
-    ia2 = 1.0 / a2 if a2 != 0.0 else 0.0
+    # tests. Edge k holds where a_k c + b_k r + k_k - eps >= 0: for a_k > 0 that is
+    # c >= x_k(r), for a_k < 0 c <= x_k(r), with x_k(r) = -(b_k r + k_k - eps) / a_k
+    # affine in r; for a_k == 0 it bounds the rows. So the run of row r is
+    # [max(c0, lower edges' x_k(r)), min(c1, upper edges' x_k(r))], computed below
+    # without branches (an edge that does not bound a side contributes -inf / +inf).
+    lo_s0, lo_t0, hi_s0, hi_t0, r0, r1 = _edge_bounds(a0, b0, k0 - eps, r0, r1)
+    lo_s1, lo_t1, hi_s1, hi_t1, r0, r1 = _edge_bounds(a1, b1, k1 - eps, r0, r1)
+    lo_s2, lo_t2, hi_s2, hi_t2, r0, r1 = _edge_bounds(a2, b2, k2 - eps, r0, r1)
     fc0 = float(c0)
     fc1 = float(c1)
     # The depth range tests are needed only if some vertex is outside [near, far]
     # (1/z inside the triangle is a convex combination of the vertices' 1/z).
     check_range = (max(iz0, max(iz1, iz2)) > iz_hi or min(iz0, min(iz1, iz2)) < iz_lo)
+    if r0 > r1:
+        return
+    rows[0] = min(rows[0], r0)
+    rows[1] = max(rows[1], r1)
     for r in range(r0, r1 + 1):
         fr = float(r)
-        e0 = b0 * fr + k0 - eps
-        e1 = b1 * fr + k1 - eps
-        e2 = b2 * fr + k2 - eps
-        lo = fc0
-        hi = fc1
-        if a0 > 0.0:
-            lo = max(lo, -e0 * ia0)
-        elif a0 < 0.0:
-            hi = min(hi, -e0 * ia0)
-        elif e0 < 0.0:
-            continue
-        if a1 > 0.0:
-            lo = max(lo, -e1 * ia1)
-        elif a1 < 0.0:
-            hi = min(hi, -e1 * ia1)
-        elif e1 < 0.0:
-            continue
-        if a2 > 0.0:
-            lo = max(lo, -e2 * ia2)
-        elif a2 < 0.0:
-            hi = min(hi, -e2 * ia2)
-        elif e2 < 0.0:
+        lo = max(max(fc0, lo_s0 * fr + lo_t0), max(lo_s1 * fr + lo_t1, lo_s2 * fr + lo_t2))
+        hi = min(min(fc1, hi_s0 * fr + hi_t0), min(hi_s1 * fr + hi_t1, hi_s2 * fr + hi_t2))
+        if not lo <= hi:
             continue
         c_lo = int(np.ceil(lo))
         c_hi = int(np.floor(hi))
         if c_lo > c_hi:
             continue
-        if c_lo < span[r, 0]:
-            span[r, 0] = c_lo
-        if c_hi > span[r, 1]:
-            span[r, 1] = c_hi
+        span[r, 0] = min(span[r, 0], c_lo)
+        span[r, 1] = max(span[r, 1], c_hi)
         ei = bi * fr + ki
         if check_range:
             for c in range(c_lo, c_hi + 1):
                 iz = ai * float(c) + ei
                 if iz > iz_hi or iz < iz_lo or iz <= 0.0:
                     continue
-                z = np.float32(1.0 / iz)
-                if z < zbuf[r, c]:
-                    zbuf[r, c] = z
+                if iz > zbuf[r, c]:
+                    zbuf[r, c] = iz
         else:
             for c in range(c_lo, c_hi + 1):
-                z = np.float32(1.0 / (ai * float(c) + ei))
-                if z < zbuf[r, c]:
-                    zbuf[r, c] = z
+                zbuf[r, c] = max(zbuf[r, c], ai * float(c) + ei)
+
+
+@njit(cache=True, inline="always")
+def _edge_bounds(a, b, k, r0, r1):
+    """For the edge a c + b r + k >= 0 of a triangle's rows r0..r1: (lo_s, lo_t, hi_s,
+    hi_t, r0, r1), the edge's lower column bound lo_s r + lo_t (-inf if it has none),
+    its upper bound hi_s r + hi_t (+inf if none), and the rows narrowed where a == 0
+    (a horizontal edge; r0 > r1 if no row is left)."""
+    if a > 0.0:
+        return -b / a, -k / a, 0.0, np.inf, r0, r1
+    if a < 0.0:
+        return 0.0, -np.inf, -b / a, -k / a, r0, r1
+    if b > 0.0:
+        r0 = max(r0, int(np.ceil(-k / b)))
+    elif b < 0.0:
+        r1 = min(r1, int(np.floor(-k / b)))
+    elif k < 0.0:
+        r1 = r0 - 1
+    return 0.0, -np.inf, 0.0, np.inf, r0, r1
 
 
 @njit(cache=True, inline="always")
@@ -139,32 +141,33 @@ def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, 
 
 
 @njit(cache=True)
-def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_start,
-                sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
-                planes, fx, fy, cx, cy, near, far, P, UV, poly, rows, span, keep):
-    """Renders one particle into ``zbuf`` (H, W) float32, which must hold inf (or
-    anything farther) where nothing was drawn yet. ``X`` (num_bodies, 4, 4) camera-frame
-    body poses. Vertices and triangles are grouped by body (``body_*_start`` delimit
-    them). A body is skipped when its bounding sphere lies outside the view frustum;
-    triangles of closed surfaces facing away from the camera are skipped unless the
-    body's sphere reaches the near plane (where clipping can expose back faces, or the
-    camera may be inside). ``P`` (V, 3), ``UV`` (V, 3) and ``poly`` (4, 3) are scratch;
-    ``rows`` and ``span`` record the pixels written (see :func:`_raster`); ``keep`` (T,)
-    bool is scratch."""
-    nb = body_tri_start.shape[0] - 1
-    for b in range(nb):
-        t_begin = body_tri_start[b]
-        t_end = body_tri_start[b + 1]
+def render_particle(zbuf, X, vertices, triangles, part_body, part_vertex_start,
+                    part_tri_start, sphere_center, sphere_radius, tri_normal, tri_offset,
+                    tri_closed, planes, fx, fy, cx, cy, near, far, P, UV, poly, rows, span,
+                    keep):
+    """Renders one particle into ``zbuf`` (H, W) float64 of inverse depths 1/z, which
+    must hold 0 (or anything farther) where nothing was drawn yet. ``X`` (num_bodies, 4,
+    4) camera-frame body poses. Vertices and triangles are grouped by part
+    (``part_*_start`` delimit them; part p belongs to body ``part_body[p]``). A part is
+    skipped when its bounding sphere lies outside the view frustum; triangles of closed
+    surfaces facing away from the camera are skipped unless the part's sphere reaches
+    the near plane (where clipping can expose back faces, or the camera may be inside).
+    ``P`` (V, 3), ``UV`` (V, 3) and ``poly`` (4, 3) are scratch; ``rows`` and ``span``
+    record the pixels written (see :func:`_raster`); ``keep`` (T,) int64 is scratch."""
+    for part in range(part_body.shape[0]):
+        b = part_body[part]
+        t_begin = part_tri_start[part]
+        t_end = part_tri_start[part + 1]
         if t_begin == t_end:
             continue
         # Bounding sphere against near, far and the four side planes.
-        sx = sphere_center[b, 0]
-        sy = sphere_center[b, 1]
-        sz = sphere_center[b, 2]
+        sx = sphere_center[part, 0]
+        sy = sphere_center[part, 1]
+        sz = sphere_center[part, 2]
         cxb = X[b, 0, 0] * sx + X[b, 0, 1] * sy + X[b, 0, 2] * sz + X[b, 0, 3]
         cyb = X[b, 1, 0] * sx + X[b, 1, 1] * sy + X[b, 1, 2] * sz + X[b, 1, 3]
         czb = X[b, 2, 0] * sx + X[b, 2, 1] * sy + X[b, 2, 2] * sz + X[b, 2, 3]
-        rad = sphere_radius[b]
+        rad = sphere_radius[part]
         if czb + rad < near or czb - rad > far:
             continue
         outside = False
@@ -179,7 +182,7 @@ def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_st
         ox = -(X[b, 0, 0] * X[b, 0, 3] + X[b, 1, 0] * X[b, 1, 3] + X[b, 2, 0] * X[b, 2, 3])
         oy = -(X[b, 0, 1] * X[b, 0, 3] + X[b, 1, 1] * X[b, 1, 3] + X[b, 2, 1] * X[b, 2, 3])
         oz = -(X[b, 0, 2] * X[b, 0, 3] + X[b, 1, 2] * X[b, 1, 3] + X[b, 2, 2] * X[b, 2, 3])
-        for i in range(body_vertex_start[b], body_vertex_start[b + 1]):
+        for i in range(part_vertex_start[part], part_vertex_start[part + 1]):
             px = vertices[i, 0]
             py = vertices[i, 1]
             pz = vertices[i, 2]
@@ -196,13 +199,14 @@ def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_st
                 P[i, 1] = y
                 P[i, 2] = z
         if all_front:
-            # Two passes: a branch-free one over all the body's triangles that keeps the
-            # front faces whose bounding box holds a pixel centre (the same tests as
-            # _raster's early returns; it vectorises), then _raster on those only.
+            # Two passes: a branch-free one over all the body's triangles that lists the
+            # front faces whose bounding box holds a pixel centre in ``keep`` (the same
+            # tests as _raster's early returns), then _raster on those only.
             H = zbuf.shape[0]
             W = zbuf.shape[1]
             w1 = W - 1.0
             h1 = H - 1.0
+            kept = 0
             for t in range(t_begin, t_end):
                 ia = triangles[t, 0]
                 ib = triangles[t, 1]
@@ -219,14 +223,15 @@ def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_st
                         <= min(w1, np.floor(max(ua, max(ub, uc)))))
                 rws = (max(0.0, np.ceil(min(va, min(vb, vc))))
                        <= min(h1, np.floor(max(va, max(vb, vc)))))
-                keep[t] = front & cols & rws
-            for t in range(t_begin, t_end):
-                if keep[t]:
-                    ia = triangles[t, 0]
-                    ib = triangles[t, 1]
-                    ic = triangles[t, 2]
-                    _raster(zbuf, UV[ia, 0], UV[ia, 1], UV[ia, 2], UV[ib, 0], UV[ib, 1],
-                            UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span)
+                keep[kept] = t
+                kept += front & cols & rws
+            for j in range(kept):
+                t = keep[j]
+                ia = triangles[t, 0]
+                ib = triangles[t, 1]
+                ic = triangles[t, 2]
+                _raster(zbuf, UV[ia, 0], UV[ia, 1], UV[ia, 2], UV[ib, 0], UV[ib, 1],
+                        UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span)
             continue
         for t in range(t_begin, t_end):
             if all_front and tri_closed[t]:
@@ -279,30 +284,38 @@ def render_particle(zbuf, X, vertices, triangles, body_vertex_start, body_tri_st
 
 
 @njit(parallel=True, cache=True)
-def render_kernel(X_CB, vertices, triangles, body_vertex_start, body_tri_start,
+def render_kernel(X_CB, vertices, triangles, part_body, part_vertex_start, part_tri_start,
                   sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
                   planes, fx, fy, cx, cy, near, far, num_chunks, out):
     """Renders particle n's body poses ``X_CB[n]`` into ``out[n]`` (N, H, W) float32."""
     N = X_CB.shape[0]
     V = vertices.shape[0]
+    H = out.shape[1]
+    W = out.shape[2]
     for chunk in prange(num_chunks):
         P = np.empty((V, 3))
         UV = np.empty((V, 3))
         poly = np.empty((4, 3))
         rows = np.empty(2, dtype=np.int64)
-        span = np.empty((out.shape[1], 2), dtype=np.int64)
-        keep = np.empty(triangles.shape[0], dtype=np.bool_)
+        span = np.empty((H, 2), dtype=np.int64)
+        keep = np.empty(triangles.shape[0], dtype=np.int64)
+        zbuf = np.empty((H, W))
         for n in range(chunk * N // num_chunks, (chunk + 1) * N // num_chunks):
-            zbuf = out[n]
-            zbuf[:, :] = np.inf
-            rows[0] = zbuf.shape[0]
+            zbuf[:, :] = 0.0
+            rows[0] = H
             rows[1] = -1
-            span[:, 0] = zbuf.shape[1]
+            span[:, 0] = W
             span[:, 1] = -1
-            render_particle(zbuf, X_CB[n], vertices, triangles, body_vertex_start,
-                            body_tri_start, sphere_center, sphere_radius, tri_normal,
-                            tri_offset, tri_closed, planes, fx, fy, cx, cy, near, far,
-                            P, UV, poly, rows, span, keep)
+            render_particle(zbuf, X_CB[n], vertices, triangles, part_body,
+                            part_vertex_start, part_tri_start, sphere_center, sphere_radius,
+                            tri_normal, tri_offset, tri_closed, planes, fx, fy, cx, cy, near,
+                            far, P, UV, poly, rows, span, keep)
+            # Depth = 1/(the largest inverse depth): the same float32 as the smallest
+            # float32(1/iz) over the surfaces (x -> float32(1/x) is monotone).
+            for r in range(H):
+                for c in range(W):
+                    iz = zbuf[r, c]
+                    out[n, r, c] = np.float32(1.0 / iz) if iz > 0.0 else np.float32(np.inf)
 
 
 def num_chunks(n: int) -> int:
@@ -324,41 +337,3 @@ def frustum_planes(fx, fy, cx, cy, width, height, margin_px: float = 1.0) -> np.
         [0.0, -fy, hi_v - cy],  # v <= hi_v
     ])
     return planes / np.linalg.norm(planes, axis=1, keepdims=True)
-
-
-def render_tables(meshes: RobotMeshes, num_bodies: int) -> tuple:
-    """The meshes regrouped by body, with per-body bounding spheres and per-triangle
-    planes, as the arguments of :func:`render_particle` after ``zbuf`` and ``X``."""
-    vertices = np.asarray(meshes.vertices, dtype=np.float64).reshape(-1, 3)
-    triangles = np.asarray(meshes.triangles, dtype=np.int64).reshape(-1, 3)
-    tri_body = np.asarray(meshes.triangle_body, dtype=np.int64).reshape(-1)
-    vertex_body = np.asarray(meshes.vertex_body, dtype=np.int64).reshape(-1)
-    closed = (np.zeros(len(triangles), bool) if meshes.triangle_closed is None
-              else np.asarray(meshes.triangle_closed, bool).reshape(-1))
-    if np.any(vertex_body[triangles] != tri_body[:, None]):
-        raise ValueError("each triangle's vertices must belong to the triangle's body")
-    v_order = np.argsort(vertex_body, kind="stable")
-    v_new = np.empty_like(v_order)
-    v_new[v_order] = np.arange(len(v_order))
-    t_order = np.argsort(tri_body, kind="stable")
-    vertices = np.ascontiguousarray(vertices[v_order])
-    triangles = np.ascontiguousarray(v_new[triangles[t_order]])
-    tri_body = tri_body[t_order]
-    closed = np.ascontiguousarray(closed[t_order])
-    vertex_body = vertex_body[v_order]
-    body_vertex_start = np.searchsorted(vertex_body, np.arange(num_bodies + 1)).astype(np.int64)
-    body_tri_start = np.searchsorted(tri_body, np.arange(num_bodies + 1)).astype(np.int64)
-    centers = np.zeros((num_bodies, 3))
-    radii = np.zeros(num_bodies)
-    for b in range(num_bodies):
-        v = vertices[body_vertex_start[b]:body_vertex_start[b + 1]]
-        if len(v):
-            centers[b] = 0.5 * (v.min(axis=0) + v.max(axis=0))
-            radii[b] = np.linalg.norm(v - centers[b], axis=1).max() * (1.0 + 1e-9) + 1e-9
-    p0, p1, p2 = (vertices[triangles[:, k]] for k in range(3))
-    normals = np.ascontiguousarray(np.cross(p1 - p0, p2 - p0))
-    offsets = np.einsum("ij,ij->i", normals, p0)
-    return (vertices, triangles, body_vertex_start, body_tri_start, centers, radii,
-            normals, offsets, closed)
-
-

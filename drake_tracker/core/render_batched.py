@@ -27,8 +27,9 @@ from drake_tracker.core.geometry import DEFAULT_SEGMENTS, RobotMeshes, extract_r
 from drake_tracker.core.kinematics import BatchedKinematics
 from drake_tracker.core.level_of_detail import LevelOfDetail, level_of_detail
 from drake_tracker.core.likelihood import PreparedObservation
+from drake_tracker.core.mesh_parts import render_tables
 from drake_tracker.core.numba_threading import SerialOrParallel
-from drake_tracker.core.rasterize import frustum_planes, num_chunks, render_kernel, render_tables
+from drake_tracker.core.rasterize import frustum_planes, num_chunks, render_kernel
 from drake_tracker.core.render_likelihood import fused_scores
 
 #: The level of detail the renderer uses unless told otherwise.

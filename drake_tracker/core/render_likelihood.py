@@ -106,7 +106,7 @@ def pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff
 
 
 def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame_body, X_BF,
-                     vertices, triangles, body_vertex_start, body_tri_start,
+                     vertices, triangles, part_body, part_vertex_start, part_tri_start,
                      sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
                      planes, fx, fy, cx, cy, near, far, chunks, height, width,
                      pixel_slot, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
@@ -115,7 +115,7 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
     contiguous chunks of particles (prange: parallel in the parallel compilation)."""
     N = q.shape[0]
     V = vertices.shape[0]
-    nb = body_tri_start.shape[0] - 1
+    nb = kind.shape[0] + 1  # one joint step per body but the world (all are connected)
     for chunk in prange(chunks):
         X = np.empty((nb, 4, 4))
         X_CB = np.empty((nb, 4, 4))
@@ -128,19 +128,19 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
         span = np.empty((height, 2), dtype=np.int64)
         span[:, 0] = width
         span[:, 1] = -1
-        zbuf = np.full((height, width), np.inf, dtype=np.float32)
+        zbuf = np.zeros((height, width))  # inverse depths, 0: nothing drawn
         slots = np.empty(height * width, dtype=np.int64)
         depths = np.empty(height * width)
         terms = np.empty(height * width)
         work = np.empty((4, height * width))
-        keep = np.empty(triangles.shape[0], dtype=np.bool_)
+        keep = np.empty(triangles.shape[0], dtype=np.int64)
         for n in range(chunk * N // chunks, (chunk + 1) * N // chunks):
             relative_poses_one(n, q, kind, inboard, outboard, q_index, axis, A, B, rev,
                                frame_body, X_BF, X, X_CB, T, M)
             rows[0] = height
             rows[1] = -1
-            render_particle(zbuf, X_CB, vertices, triangles, body_vertex_start,
-                            body_tri_start, sphere_center, sphere_radius, tri_normal,
+            render_particle(zbuf, X_CB, vertices, triangles, part_body, part_vertex_start,
+                            part_tri_start, sphere_center, sphere_radius, tri_normal,
                             tri_offset, tri_closed, planes, fx, fy, cx, cy, near, far,
                             P, UV, poly, rows, span, keep)
             count = 0
@@ -151,14 +151,15 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
                 span[r, 1] = -1
                 base = r * width
                 for c in range(c_lo, c_hi + 1):
-                    d = zbuf[r, c]
-                    if d == np.inf:
+                    iz = zbuf[r, c]
+                    if iz == 0.0:
                         continue
-                    zbuf[r, c] = np.inf
+                    zbuf[r, c] = 0.0
                     p = pixel_slot[base + c]
                     if p >= 0:
                         slots[count] = p
-                        depths[count] = d
+                        # the rendered image's float32 depth (see render_kernel)
+                        depths[count] = np.float32(1.0 / iz)
                         count += 1
             pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff,
                              occ_coeff, log_p_occ_inf, uniform, lam, occlusion, truncation,
@@ -182,7 +183,7 @@ def fused_scores(q: np.ndarray, frame_tables: tuple, render_tables: tuple,
     """(N,) log-likelihoods of configurations q (N, nq), C-contiguous and checked: forward
     kinematics to the camera frame (``frame_tables`` from
     :meth:`~drake_tracker.core.kinematics.BatchedKinematics.frame_tables`), rendering
-    with ``render_tables`` (:func:`~drake_tracker.core.rasterize.render_tables`),
+    with ``render_tables`` (:func:`~drake_tracker.core.mesh_parts.render_tables`),
     ``frustum_planes`` and ``projection`` (fx, fy, cx, cy with the pixel-centre offset
     applied), and scoring, in one kernel call. Serial or parallel as ``policy`` chooses
     (default: parallel whenever numba has more than one thread)."""
