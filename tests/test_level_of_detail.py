@@ -6,7 +6,7 @@ import pytest
 
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.geometry import sphere_mesh
-from drake_tracker.core.level_of_detail import LevelOfDetail, simplify_mesh
+from drake_tracker.core.level_of_detail import LevelOfDetail, cluster_mesh, edges_balanced
 from drake_tracker.core.render_batched import BatchedDepthRenderer
 from drake_tracker.core.renderer import (
     default_view_configuration,
@@ -43,19 +43,31 @@ def test_level_of_detail_matches_drake_vtk_on_cad_meshes(model, stride):
     assert np.percentile(diff, 95) <= 0.010, np.percentile(diff, 95)
 
 
-def test_simplified_sphere_stays_within_tolerance():
-    radius, tolerance = 0.06, 0.0015
+def test_clustered_sphere_stays_within_a_cell_and_keeps_its_culling():
+    radius, cell = 0.06, 0.01
     vertices, triangles = sphere_mesh(radius, 96)
-    v, t = simplify_mesh(vertices, triangles, tolerance)
+    v, t = cluster_mesh(vertices, triangles, cell)
     assert len(t) < 0.25 * len(triangles)
-    # Surface points: vertices, edge midpoints and centroids of the simplified triangles.
+    assert edges_balanced(triangles) and edges_balanced(t)
+    # Surface points: vertices, edge midpoints and centroids of the simplified triangles;
+    # the bound is the cell's diagonal (the tessellated input lies within ~0.1 mm).
     corners = v[t]
     points = np.concatenate([v, corners.mean(axis=1),
                              0.5 * (corners[:, 0] + corners[:, 1]),
                              0.5 * (corners[:, 1] + corners[:, 2])])
-    # The tessellated input itself lies within ~0.1 mm of the sphere (96 segments).
     error = np.abs(np.linalg.norm(points, axis=1) - radius)
-    assert error.max() <= tolerance + 2e-4, error.max()
+    assert error.max() <= np.sqrt(3.0) * cell + 2e-4, error.max()
+    # The quadric placement keeps the vertices on the surface far better than the bound.
+    assert np.median(np.abs(np.linalg.norm(v, axis=1) - radius)) < 0.1 * cell
+    # Triangles keep their winding: outward normals stay outward.
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    assert np.all(np.einsum("ij,ij->i", normals, corners.mean(axis=1)) > 0)
+
+
+def test_edges_balanced_detects_an_open_mesh():
+    vertices, triangles = sphere_mesh(0.05, 16)
+    assert edges_balanced(triangles)
+    assert not edges_balanced(triangles[1:])
 
 
 def test_primitive_robots_keep_their_meshes():
@@ -67,5 +79,5 @@ def test_primitive_robots_keep_their_meshes():
 
 
 def test_bad_level_of_detail_is_rejected():
-    with pytest.raises(ValueError, match="tolerance_px"):
-        LevelOfDetail(tolerance_px=0.0)
+    with pytest.raises(ValueError, match="cell_px"):
+        LevelOfDetail(cell_px=0.0)

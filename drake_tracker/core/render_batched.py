@@ -65,7 +65,7 @@ class BatchedDepthRenderer:
                                                                segments)
         self.meshes = self.source_meshes
         if detail is not None:
-            self.meshes = level_of_detail(self.source_meshes, detail.tolerance_m(intrinsics),
+            self.meshes = level_of_detail(self.source_meshes, detail.cell_m(intrinsics),
                                           detail.min_reduction)
         self._tables = render_tables(self.meshes, self.kinematics.num_bodies)
         self._frame_tables = self.kinematics.frame_tables(model.camera_frame)
