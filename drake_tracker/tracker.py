@@ -94,7 +94,14 @@ class Tracker:
         stamped ``t`` (s). Raises ValueError for a wrong length. A reading with a value or
         stamp that is not usable is skipped with a warning (``core/timestamps.py``): one
         per run of non-finite values, rate-limited for stamps."""
-        reading = np.asarray(robot_reading, float)
+        try:
+            t = float(t)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"joint reading time stamp {t!r} is not a number") from err
+        try:
+            reading = np.asarray(robot_reading, float)
+        except (TypeError, ValueError) as err:
+            raise ValueError(f"joint reading stamped {t} s is not numeric: {err}") from err
         if reading.shape != (len(self._robot),):
             raise ValueError(f"joint reading has shape {reading.shape}, expected "
                              f"({len(self._robot)},) for joints {self.model.robot_joint_names}")

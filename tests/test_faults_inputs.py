@@ -91,3 +91,29 @@ def test_sixteen_bit_millimetre_images_are_read_as_metres(apollo, run):
         assert tracker.add_image(DepthFrame(0.1, 0.15, image, 3))
         estimates.append(tracker.estimate().positions)
     np.testing.assert_array_equal(estimates[1], estimates[0])
+
+
+@pytest.mark.parametrize("loader", [load_tracker_params, load_scenario])
+def test_a_yaml_syntax_error_names_the_file(tmp_path, loader):
+    """It raised yaml's ParserError, naming no file."""
+    path = write(tmp_path, "broken.yaml", "image: [\n")
+    with pytest.raises(ValueError, match=rf"^{path}: "):
+        loader(path)
+
+
+def test_an_absurd_reading_is_skipped_like_a_non_finite_one(apollo, run, caplog):
+    """A finite reading of 1e300 rad was accepted, and the next image crashed the tracker
+    (the CPF's proposal overflowed); a stamp that is not a number raised a TypeError."""
+    tracker = Tracker(apollo, run.camera_intrinsics, small_params())
+    k = len(run.reading_times_s) // 2
+    for j in range(len(run.reading_times_s)):
+        value = np.full_like(run.readings_rad[j], 1e300) if j == k else run.readings_rad[j]
+        with caplog.at_level("WARNING"):
+            tracker.add_reading(run.reading_times_s[j], value)
+    assert f"{run.reading_times_s[k]:.4f} s is not finite" in caplog.text
+    assert tracker.add_image(DepthFrame(0.2, 0.25, run.depth_images_m[6], 6))
+    assert np.all(np.isfinite(tracker.estimate().positions))
+    with pytest.raises(ValueError, match="time stamp 'x' is not a number"):
+        tracker.add_reading("x", run.readings_rad[0])
+    with pytest.raises(ValueError, match="not numeric"):
+        tracker.add_reading(1.0, ["a"] * len(run.joint_names))

@@ -214,6 +214,11 @@ class StreamClock:
         return self._accept(raw, reanchored_by=shift)
 
 
+#: A reading value beyond this (rad, or m) is skipped like a non-finite one: squared in
+#: the filter and the CPF, it would overflow (1e300 did, at the next image).
+MAX_READING_MAGNITUDE = 1e6
+
+
 class ReadingGate:
     """The joint readings' policy: new-sample detection, the stamp's :class:`StreamClock`,
     and one warning per run of non-finite values (an encoder gap).
@@ -245,15 +250,17 @@ class ReadingGate:
         """The reading's time in the tracker's time base, or None (skipped, logged)."""
         self.last_raw_s = float(raw_s)
         self.restarted = False
-        bad = ~np.isfinite(values)
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(values) <= MAX_READING_MAGNITUDE)  # NaN, ±inf, absurd values
         if np.any(bad):
             if self.gap_start_s is None:
                 self.gap_start_s = float(raw_s)
                 names = [n for n, b in zip(self.joint_names, bad, strict=True) if b]
                 if self.logger:
                     self.logger.warning(
-                        "joint reading stamped %.4f s is not finite (%s): readings are "
-                        "skipped until they are finite again (one warning per gap)",
+                        "joint reading stamped %.4f s is not finite (%s; or beyond "
+                        "±1e6, which overflows the filter): readings are skipped until "
+                        "they are finite again (one warning per gap)",
                         raw_s, ", ".join(names))
             self.gap_readings += 1
             return None

@@ -65,7 +65,10 @@ def load_scenario(name_or_path: str | Path, validate: bool = True) -> Scenario:
     if path.suffix in (".yaml", ".yml") or path.is_file():
         if not path.is_file():
             raise FileNotFoundError(f"scenario file '{path}' does not exist")
-        raw = yaml_load(filename=str(path)) or {}
+        try:
+            raw = yaml_load(filename=str(path)) or {}
+        except Exception as err:  # YAML syntax (yaml.YAMLError)
+            raise ValueError(f"{path}: not a readable YAML file: {err}") from err
         if not isinstance(raw, dict):
             raise ValueError(f"{path}: a scenario YAML must be a mapping")
         if raw.get("preset") is not None and not isinstance(raw["preset"], str):
