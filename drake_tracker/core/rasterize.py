@@ -24,13 +24,15 @@ import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before
 
 
 @njit(cache=True, inline="always")
-def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span):
+def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span, box_px):
     """Rasterises one projected triangle (pixel coordinates u, v and inverse depths
     1/z of its vertices, all in front of the near plane up to rounding) into ``zbuf``,
     which holds inverse depths (0: nothing drawn), keeping the largest: the nearest
     surface. 1/z is affine in screen space (perspective-correct), so a pixel costs one
     multiply-add and a max, no division. ``rows`` (r_min, r_max) grows to cover the
-    rows written, and ``span[r]`` (c_min, c_max) the columns written in row r."""
+    rows written, and ``span[r]`` (c_min, c_max) the columns written in row r (a
+    superset). A triangle whose box holds at most ``box_px`` pixel centres goes to
+    :func:`_raster_box`; the same pixels and depths either way (tested)."""
     H, W = zbuf.shape
     umin = min(u0, min(u1, u2))
     umax = max(u0, max(u1, u2))
@@ -66,6 +68,13 @@ def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span):
     # triangles whose vertices were clipped exactly onto the near plane).
     iz_hi = (1.0 / near) * (1.0 + 1e-9)
     iz_lo = 1.0 / far
+    # The depth range tests are needed only if some vertex is outside [near, far] (1/z
+    # inside the triangle is a convex combination of the vertices' 1/z).
+    check_range = (max(iz0, max(iz1, iz2)) > iz_hi or min(iz0, min(iz1, iz2)) < iz_lo)
+    if (r1 - r0 + 1) * (c1 - c0 + 1) <= box_px:
+        _raster_box(zbuf, a0, b0, k0 - eps, a1, b1, k1 - eps, a2, b2, k2 - eps, ai, bi, ki,
+                    r0, r1, c0, c1, check_range, iz_lo, iz_hi, rows, span)
+        return
     # Per row, the exact run of columns where all three edge functions are >= eps, so
     # that the work per row is proportional to the pixels covered (long thin triangles
     # have bounding boxes far larger than themselves) and the inner loop has no edge
@@ -79,9 +88,6 @@ def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span):
     lo_s2, lo_t2, hi_s2, hi_t2, r0, r1 = _edge_bounds(a2, b2, k2 - eps, r0, r1)
     fc0 = float(c0)
     fc1 = float(c1)
-    # The depth range tests are needed only if some vertex is outside [near, far]
-    # (1/z inside the triangle is a convex combination of the vertices' 1/z).
-    check_range = (max(iz0, max(iz1, iz2)) > iz_hi or min(iz0, min(iz1, iz2)) < iz_lo)
     if r0 > r1:
         return
     rows[0] = min(rows[0], r0)
@@ -111,6 +117,37 @@ def _raster(zbuf, u0, v0, iz0, u1, v1, iz1, u2, v2, iz2, near, far, rows, span):
                 zbuf[r, c] = max(zbuf[r, c], ai * float(c) + ei)
 
 
+#: A triangle whose bounding box holds at most this many pixel centres is rasterised by
+#: testing every pixel of the box (:func:`_raster_box`), without the per-row setup of the
+#: run of columns: cheaper for the few-pixel triangles that most meshes have at 80x60.
+SMALL_BOX_PX = 32
+
+
+@njit(cache=True, inline="always")
+def _raster_box(zbuf, a0, b0, g0, a1, b1, g1, a2, b2, g2, ai, bi, ki, r0, r1, c0, c1,
+                check_range, iz_lo, iz_hi, rows, span):
+    """Rasterises a small triangle by testing each pixel of its box [r0, r1] x [c0, c1]
+    against its edges a_k c + b_k r + g_k >= 0 (as :func:`_raster`), without branches;
+    the box's columns are recorded in ``span`` (a superset of those written)."""
+    rows[0] = min(rows[0], r0)
+    rows[1] = max(rows[1], r1)
+    for r in range(r0, r1 + 1):
+        fr = float(r)
+        h0 = b0 * fr + g0
+        h1 = b1 * fr + g1
+        h2 = b2 * fr + g2
+        ei = bi * fr + ki
+        for c in range(c0, c1 + 1):
+            fc = float(c)
+            iz = ai * fc + ei
+            inside = (a0 * fc + h0 >= 0.0) & (a1 * fc + h1 >= 0.0) & (a2 * fc + h2 >= 0.0)
+            if check_range:
+                inside &= (iz <= iz_hi) & (iz >= iz_lo) & (iz > 0.0)
+            zbuf[r, c] = max(zbuf[r, c], iz if inside else 0.0)
+        span[r, 0] = min(span[r, 0], c0)
+        span[r, 1] = max(span[r, 1], c1)
+
+
 @njit(cache=True, inline="always")
 def _edge_bounds(a, b, k, r0, r1):
     """For the edge a c + b r + k >= 0 of a triangle's rows r0..r1: (lo_s, lo_t, hi_s,
@@ -131,13 +168,14 @@ def _edge_bounds(a, b, k, r0, r1):
 
 
 @njit(cache=True, inline="always")
-def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, far, rows, span):
+def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, far, rows,
+                span):
     iz0 = 1.0 / z0
     iz1 = 1.0 / z1
     iz2 = 1.0 / z2
     _raster(zbuf, fx * x0 * iz0 + cx, fy * y0 * iz0 + cy, iz0,
             fx * x1 * iz1 + cx, fy * y1 * iz1 + cy, iz1,
-            fx * x2 * iz2 + cx, fy * y2 * iz2 + cy, iz2, near, far, rows, span)
+            fx * x2 * iz2 + cx, fy * y2 * iz2 + cy, iz2, near, far, rows, span, SMALL_BOX_PX)
 
 
 @njit(cache=True)
@@ -231,7 +269,8 @@ def render_particle(zbuf, X, vertices, triangles, part_body, part_vertex_start,
                 ib = triangles[t, 1]
                 ic = triangles[t, 2]
                 _raster(zbuf, UV[ia, 0], UV[ia, 1], UV[ia, 2], UV[ib, 0], UV[ib, 1],
-                        UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span)
+                        UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span,
+                        SMALL_BOX_PX)
             continue
         for t in range(t_begin, t_end):
             if all_front and tri_closed[t]:
@@ -243,7 +282,8 @@ def render_particle(zbuf, X, vertices, triangles, part_body, part_vertex_start,
             ic = triangles[t, 2]
             if all_front:
                 _raster(zbuf, UV[ia, 0], UV[ia, 1], UV[ia, 2], UV[ib, 0], UV[ib, 1],
-                        UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span)
+                        UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span,
+                        SMALL_BOX_PX)
                 continue
             za = P[ia, 2]
             zb = P[ib, 2]
