@@ -376,3 +376,28 @@ def test_a_clock_step_shared_by_encoders_and_camera_is_followed_by_both(apollo, 
     diagram, images_applied = simulate(apollo, stepped, p, stamps)
     assert images_applied == sum(applied.values())
     assert_same_when_settled(stepped, diagram, offline)
+
+
+def test_a_copied_gate_is_independent_and_shares_only_what_never_changes():
+    """Drake deep-copies the systems' abstract state at every update: the gate's copy
+    must take the same decisions as the original from then on, and neither may see the
+    other's later samples."""
+    import copy
+
+    from drake_tracker.core.timestamps import ReadingGate
+    from drake_tracker.params import TimestampParams
+
+    gate = ReadingGate(TimestampParams(), ["a", "b"])
+    for k in range(20):
+        gate.admit(0.01 * k, np.zeros(2))
+    gate.admit(float("nan"), np.zeros(2))
+    clone = copy.deepcopy(gate)
+    assert clone.logger is gate.logger and clone.clock.params is gate.clock.params
+    for later in (0.25, 0.26, 1000.0):
+        assert clone.admit(later, np.zeros(2)) == gate.admit(later, np.zeros(2))
+    assert clone.warnings.counts == gate.warnings.counts
+    clone.admit(0.27, np.zeros(2))
+    clone.admit(0.26, np.zeros(2))  # not after the latest: counted in the clone only
+    assert clone.warnings.counts != gate.warnings.counts
+    assert clone.clock.latest_s == 0.27 and gate.clock.latest_s == 0.26
+    assert clone.clock._gaps is not gate.clock._gaps

@@ -51,6 +51,12 @@ class RateLimitedWarning:
         self.enabled = enabled
         self.counts: dict[str, int] = {}
 
+    def __deepcopy__(self, memo) -> RateLimitedWarning:
+        # Drake copies a system's abstract state at every update: share the logger.
+        clone = RateLimitedWarning(self.logger, self.enabled)
+        clone.counts = dict(self.counts)
+        return clone
+
     def warn(self, kind: str, message: str) -> None:
         count = self.counts.get(kind, 0) + 1
         self.counts[kind] = count
@@ -110,6 +116,15 @@ class StreamClock:
         self._accepted = 0
         self._lag_run_count = 0
         self._lag_run_first = 0.0
+
+    def __deepcopy__(self, memo) -> StreamClock:
+        """A copy that shares the (immutable) parameters and name: Drake copies a
+        system's abstract state at every update, 1000 times a simulated second."""
+        clone = object.__new__(StreamClock)
+        clone.__dict__.update(self.__dict__)
+        clone._gaps = self._gaps.copy()
+        clone._lags = self._lags.copy()
+        return clone
 
     @property
     def recent_period_s(self) -> float:
@@ -240,6 +255,14 @@ class ReadingGate:
         #: Whether the latest admitted reading restarted the time base
         #: (``StampDecision.restarted``): the caller restarts its belief from it.
         self.restarted = False
+
+    def __deepcopy__(self, memo) -> ReadingGate:
+        """A copy that shares the logger and joint names (see StreamClock's)."""
+        clone = object.__new__(ReadingGate)
+        clone.__dict__.update(self.__dict__)
+        clone.clock = copy.deepcopy(self.clock, memo)
+        clone.warnings = copy.deepcopy(self.warnings, memo)
+        return clone
 
     def is_new(self, raw_s: float) -> bool:
         """Whether a stamp held on a port is a new sample (differs from the last seen)."""
