@@ -61,8 +61,9 @@ RECORD_S = FAULT_START_S + IMAGE_OUTAGE_S + 4.0
 LOSSLESS_MM = 15.0
 RECOVERY_SLACK_MM = 2.0
 #: Faults that withhold data: error bound (mm) from the fault's start on. In brackets the
-#: largest error measured at 8b9ed24, then at 9e7fa4d (the vertex-clustering level of
-#: detail of 5e4828a): the bounds are about 1.4 times the larger.
+#: largest error measured at 8b9ed24, then at 9e7fa4d (bias defaults σb = 0.0088,
+#: c = 0.98 instead of 0.02, 0.9: the bias is held longer without images; and the level
+#: of detail of 5e4828a): the bounds are about 1.4 times the larger.
 BOUND_MM = {
     "no_images": 160.0,  # (115, 37) 10 s without images: the bias estimate relaxes
     "full_occlusion": 80.0,  # (58, 19)
