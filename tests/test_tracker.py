@@ -64,8 +64,8 @@ def test_bad_images_are_rejected(apollo):
     tracker.add_reading(0.0, np.zeros(len(apollo.robot_joint_names)))
     with pytest.raises(ValueError, match="shape"):
         tracker.add_image(DepthFrame(0.0, 0.0, np.ones((60, 81), np.float32), 0))
-    with pytest.raises(ValueError, match="dtype"):
-        tracker.add_image(DepthFrame(0.0, 0.0, np.ones((60, 80), np.uint16), 0))
+    with pytest.raises(ValueError, match="dtype"):  # uint16 is millimetres (issue 14)
+        tracker.add_image(DepthFrame(0.0, 0.0, np.ones((60, 80), np.int32), 0))
     with pytest.raises(ValueError, match="empty"):
         tracker.add_image(DepthFrame(0.0, 0.0, np.ones((0, 0), np.float32), 0))
 
