@@ -48,8 +48,8 @@ class JointNoise:
     #: the bias relaxes to N(0, σb²/(-2 ln c)) (2.5 deg). 0.98 keeps 90 % of a learnt bias
     #: over a 5 s occlusion; the former 0.9 kept 59 % and the hand drifted back towards
     #: the encoders behind the box (occlusion-heavy: 53-62 mm median while occluded, now
-    #: 15-24; README, "Occlusion"). With 0.98 and σb = 0.02 the prior grew to 2.5 deg
-    #: behind the box and the images walked the estimate off (lasting seed 1: 176 mm).
+    #: 10-20; README, "A bias that outlasts an occlusion"). With 0.98 and σb = 0.02 the
+    #: prior grew to 2.5 deg behind the box and the images walked the estimate off.
     bias_decay_per_s: float = 0.98
     #: Expected bias jumps per second (a cable slipping, a gear skipping): the image
     #: update's prior admits a step of ``bias_jump_std_rad`` with probability
