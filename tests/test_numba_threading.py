@@ -81,3 +81,54 @@ def test_serial_and_parallel_kernels_give_identical_scores():
         numba.set_num_threads(previous)
     np.testing.assert_array_equal(serial, parallel)
     assert np.ptp(serial) > 1.0
+
+
+_THREAD_IDS_SCRIPT = '''
+import sys
+import numpy as np
+from numba import get_thread_id, prange, set_num_threads
+sys.path.insert(0, sys.argv[1])
+from drake_tracker.core.numba_threading import serial_and_parallel
+
+def thread_ids(out):
+    for i in prange(out.shape[0]):
+        x = 0.0
+        for k in range(200_000):
+            x += np.sqrt(k + i)
+        out[i] = get_thread_id() + 0.0 * x
+
+serial, parallel = serial_and_parallel(thread_ids)
+set_num_threads(2)
+a, b = np.zeros(64), np.zeros(64)
+serial(a)
+parallel(b)
+print(len(set(a.tolist())), len(set(b.tolist())))
+'''
+
+
+def test_the_parallel_compilation_stays_parallel_when_loaded_from_the_cache(tmp_path):
+    """numba's cache keys a function by name, not by its options (numba issue 6845): the
+    parallel compilation must not load the serial one's code. Two processes (the second
+    loads both from the cache) run each on 64 iterations with 2 threads."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "kernels.py"
+    script.write_text(_THREAD_IDS_SCRIPT)
+    package_root = str(Path(__file__).resolve().parents[1])
+    env = {"NUMBA_NUM_THREADS": "2", "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+           "PATH": "/usr/bin:/bin"}
+    for run in ("compiles", "loads from the cache"):
+        result = subprocess.run([sys.executable, str(script), package_root], env=env,
+                                capture_output=True, text=True, timeout=300, check=True)
+        serial_threads, parallel_threads = map(int, result.stdout.split())
+        assert (serial_threads, parallel_threads) == (1, 2), run
+
+
+def test_the_scoring_kernels_have_cache_files_of_their_own():
+    from drake_tracker.core import render_likelihood
+
+    serial, parallel = render_likelihood._score_serial, render_likelihood._score_parallel
+    assert parallel.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
+    assert serial.py_func.__qualname__ != parallel.py_func.__qualname__

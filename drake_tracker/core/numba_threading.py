@@ -22,6 +22,8 @@ this default.
 from __future__ import annotations
 
 import os
+import types
+from collections.abc import Callable
 
 import numba
 
@@ -81,3 +83,23 @@ class SerialOrParallel:
         old = self.cost_per_item[parallel]
         self.cost_per_item[parallel] = cost if old is None else (
             (1.0 - self.smoothing) * old + self.smoothing * cost)
+
+
+def serial_and_parallel(function: Callable, **options) -> tuple[Callable, Callable]:
+    """``function`` compiled twice with ``cache=True``: serially, and with
+    ``parallel=True`` (its ``prange`` loops over threads).
+
+    Numba's on-disk cache keys a compiled function by its qualified name, source line and
+    argument types, not by its compile options (numba issue 6845): compiled twice under
+    one name, the second compilation loads the first one's machine code from the cache,
+    and the "parallel" kernel runs serially. The parallel one is therefore compiled from
+    a copy of the function under another qualified name, which has cache files of its own.
+    """
+    renamed = types.FunctionType(function.__code__, function.__globals__,
+                                 function.__name__ + "_parallel", function.__defaults__,
+                                 function.__closure__)
+    renamed.__qualname__ = function.__qualname__ + "_parallel"
+    renamed.__doc__ = function.__doc__
+    renamed.__module__ = function.__module__
+    return (numba.njit(cache=True, **options)(function),
+            numba.njit(cache=True, parallel=True, **options)(renamed))

@@ -30,7 +30,7 @@ from numba import njit, prange
 
 from drake_tracker.core.kinematics import relative_poses_one
 from drake_tracker.core.likelihood import PreparedObservation
-from drake_tracker.core.numba_threading import SerialOrParallel
+from drake_tracker.core.numba_threading import SerialOrParallel, serial_and_parallel
 from drake_tracker.core.rasterize import num_chunks, render_particle
 from drake_tracker.core.vector_math import exp_inplace, log_inplace
 
@@ -172,8 +172,7 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
 
 #: The same kernel compiled twice: serial (one thread: no threading layer, no thread
 #: wake-ups, which cost milliseconds on a loaded machine) and parallel over chunks.
-_score_serial = njit(cache=True)(_score_particles)
-_score_parallel = njit(parallel=True, cache=True)(_score_particles)
+_score_serial, _score_parallel = serial_and_parallel(_score_particles)
 
 
 def fused_scores(q: np.ndarray, frame_tables: tuple, render_tables: tuple,
