@@ -24,7 +24,7 @@ def test_policy_measures_both_then_uses_the_cheaper_and_reprobes():
     previous = numba.get_num_threads()
     numba.set_num_threads(2)
     try:
-        policy = SerialOrParallel(probe_every=4, smoothing=1.0)
+        policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0)
         assert policy.use_parallel() is False  # nothing measured: serial first
         policy.record(False, 1.0, 10)
         assert policy.use_parallel() is True  # then parallel, once
@@ -33,6 +33,27 @@ def test_policy_measures_both_then_uses_the_cheaper_and_reprobes():
         assert choices.count(True) == 2  # only the probes
         policy.record(True, 0.2, 10)  # the load went away
         assert [policy.use_parallel() for _ in range(3)].count(True) >= 2
+    finally:
+        numba.set_num_threads(previous)
+
+
+def test_the_first_call_of_each_compilation_is_not_measured():
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        return
+    previous = numba.get_num_threads()
+    numba.set_num_threads(2)
+    try:
+        policy = SerialOrParallel(smoothing=1.0, warmup_calls=1)
+        assert policy.use_parallel() is False
+        policy.record(False, 5.0, 10)  # compiles / loads: not measured
+        assert policy.use_parallel() is False and policy.cost_per_item[False] is None
+        policy.record(False, 1.0, 10)
+        assert policy.use_parallel() is True
+        policy.record(True, 50.0, 10)  # starts the threads: not measured
+        assert policy.use_parallel() is True
+        policy.record(True, 0.6, 10)
+        assert policy.cost_per_item == {False: 0.1, True: 0.06}
+        assert policy.use_parallel() is True
     finally:
         numba.set_num_threads(previous)
 

@@ -60,11 +60,18 @@ class SerialOrParallel:
     With one numba thread the serial version is always used.
     """
 
-    def __init__(self, probe_every: int = 32, smoothing: float = 0.2):
+    def __init__(self, probe_every: int = 64, smoothing: float = 0.3,
+                 warmup_calls: int = 1):
+        """``warmup_calls``: the first calls of each compilation are not measured (they
+        include loading the code and starting the threads: milliseconds, which made the
+        parallel kernel look several times dearer than it is, and kept the policy on the
+        serial one for hundreds of calls)."""
         self.probe_every = int(probe_every)
         self.smoothing = float(smoothing)
+        self.warmup_calls = int(warmup_calls)
         self.cost_per_item: dict[bool, float | None] = {False: None, True: None}
         self._calls = 0
+        self._seen = {False: 0, True: 0}
 
     def use_parallel(self) -> bool:
         """Whether the next call should run the parallel compilation."""
@@ -72,13 +79,18 @@ class SerialOrParallel:
             return False
         self._calls += 1
         serial, parallel = self.cost_per_item[False], self.cost_per_item[True]
-        if parallel is None or serial is None:
-            return serial is not None  # measure each once: serial first, then parallel
+        if serial is None:
+            return False  # measure serial first, then parallel
+        if parallel is None:
+            return True
         faster = parallel < serial
         return (not faster) if self._calls % self.probe_every == 0 else faster
 
     def record(self, parallel: bool, seconds: float, items: int) -> None:
-        """Records a call's wall time for ``items`` items."""
+        """Records a call's wall time for ``items`` items (ignored while warming up)."""
+        self._seen[parallel] += 1
+        if self._seen[parallel] <= self.warmup_calls:
+            return
         cost = seconds / max(1, items)
         old = self.cost_per_item[parallel]
         self.cost_per_item[parallel] = cost if old is None else (
