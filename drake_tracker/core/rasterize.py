@@ -272,19 +272,11 @@ def render_particle(zbuf, X, vertices, triangles, part_body, part_vertex_start,
                         UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span,
                         SMALL_BOX_PX)
             continue
+        # The part reaches the near plane: no back-face culling, clipping per triangle.
         for t in range(t_begin, t_end):
-            if all_front and tri_closed[t]:
-                if (tri_normal[t, 0] * ox + tri_normal[t, 1] * oy + tri_normal[t, 2] * oz
-                        <= tri_offset[t]):
-                    continue  # back face
             ia = triangles[t, 0]
             ib = triangles[t, 1]
             ic = triangles[t, 2]
-            if all_front:
-                _raster(zbuf, UV[ia, 0], UV[ia, 1], UV[ia, 2], UV[ib, 0], UV[ib, 1],
-                        UV[ib, 2], UV[ic, 0], UV[ic, 1], UV[ic, 2], near, far, rows, span,
-                        SMALL_BOX_PX)
-                continue
             za = P[ia, 2]
             zb = P[ib, 2]
             zc = P[ic, 2]
