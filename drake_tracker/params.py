@@ -287,10 +287,7 @@ def validate_tracker_params(params: TrackerParams) -> None:
            "must be 'batched' or 'drake'")
     _check(0 < im.near_m < im.far_m, "image.near_m/far_m", (im.near_m, im.far_m),
            "need 0 < near_m < far_m")
-    for name, value in vars(im.likelihood).items():
-        if isinstance(value, float):
-            _check(math.isfinite(value), f"image.likelihood.{name}", value, "must be finite")
-    im.likelihood.validate()
+    im.likelihood.validate("image.likelihood")
     params.health.validate()
     _check(im.seed >= 0 and int(im.seed) == im.seed, "image.seed", im.seed,
            "must be an integer >= 0")

@@ -48,11 +48,16 @@ class LikelihoodParams:
     #: ``truncated`` (the paper's: truncated to [0, d]); see the module docstring.
     occluder_depth: str = "independent"
 
-    def validate(self) -> None:
+    def validate(self, where: str = "LikelihoodParams") -> None:
+        """Raises ValueError naming the field as ``where.field`` (e.g.
+        ``image.likelihood.max_depth_m`` when loaded with the tracker's parameters)."""
         def need(cond: bool, field: str, why: str) -> None:
             if not cond:
-                raise ValueError(f"LikelihoodParams.{field} = {getattr(self, field)}: {why}")
+                raise ValueError(f"{where}.{field} = {getattr(self, field)!r}: {why}")
 
+        for field, value in vars(self).items():
+            if isinstance(value, float):
+                need(math.isfinite(value), field, "must be finite")
         need(0 < self.tail_weight < 1, "tail_weight", "must be in (0, 1)")
         need(self.depth_noise_std_m > 0, "depth_noise_std_m", "must be > 0")
         need(self.depth_noise_factor_per_m >= 0, "depth_noise_factor_per_m", "must be >= 0")
