@@ -156,13 +156,14 @@ class Tracker:
         anchor = self.buffer.image_anchor(t)
         outcome = self.images.observe(
             frame, anchor.prior, jump_window_s(t, self.last_applied_image_s, self.health),
-            self.health.acquired)
+            self.health)
         if t >= self.last_applied_image_s:  # an out-of-order image does not pace the rest
             self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
         self.last_result = outcome.result
         if outcome.observation is None:
             return self._skip(frame, "no valid depth pixel", "images without a valid pixel")
-        self.health = next_health(self.health, outcome.consistency, self.params.health)
+        self.health = next_health(self.health, outcome.consistency, self.params.health,
+                                  outcome.restarted, outcome.misplaced)
         self.buffer.add_image_observation(anchor, outcome.observation)
         self.last_applied_image_s = max(t, self.last_applied_image_s)
         self.num_images_applied += 1

@@ -401,3 +401,14 @@ def test_a_copied_gate_is_independent_and_shares_only_what_never_changes():
     assert clone.warnings.counts != gate.warnings.counts
     assert clone.clock.latest_s == 0.27 and gate.clock.latest_s == 0.26
     assert clone.clock._gaps is not gate.clock._gaps
+
+
+def test_diagram_warns_of_frames_it_never_saw(apollo, run, caplog):
+    """A camera that drops frames (or frames replaced on the port between two checks)
+    shows as a gap in the sequence numbers: counted as skipped, and logged, where before
+    it was only counted."""
+    sequences = np.arange(len(run.image_capture_times_s))
+    sequences[6:] += 3  # three frames after image 5 never reached the port
+    with caplog.at_level(logging.WARNING):
+        simulate(apollo, run, small_params(), run.reading_times_s, sequences)
+    assert "3 frame(s) before image 9 were never on the depth port" in caplog.text

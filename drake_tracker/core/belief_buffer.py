@@ -28,7 +28,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.core.kalman import MEAN_A, VAR_A, JointKalmanBank, recombine_with_bias
+from drake_tracker.core.kalman import (
+    MEAN_A,
+    MEAN_B,
+    VAR_A,
+    VAR_B,
+    JointKalmanBank,
+    recombine_with_bias,
+)
 
 log = logging.getLogger(__name__)
 
@@ -38,15 +45,36 @@ class StaleReadingError(ValueError):
 
 
 @dataclass(frozen=True)
+class Restart:
+    """Forgets a belief that the images showed wrong: each joint's angle goes to where
+    the encoders put it with the bias mean added back (``a + b``: for a robot joint, its
+    reading's angle at zero bias; a virtual joint keeps its mean), the bias to 0, and the
+    variances to ``angle_var`` and ``bias_var`` (the tracker's start). Commutes with a
+    shift of the angles, so it can be stored at an image's anchor."""
+
+    angle_var: np.ndarray
+    bias_var: np.ndarray
+
+    def apply(self, prior: np.ndarray) -> np.ndarray:
+        restarted = np.zeros_like(prior)
+        restarted[MEAN_A] = prior[MEAN_A] + prior[MEAN_B]
+        restarted[VAR_A] = self.angle_var
+        restarted[VAR_B] = self.bias_var
+        return restarted
+
+
+@dataclass(frozen=True)
 class AngleObservation:
     """A Gaussian pseudo-observation of the joint angles, in information form.
 
     Applied to a prior with angle marginal (μ, S): posterior precision ``1/S + precision``
-    and posterior information ``μ/S + information``; the bias follows by eq. (16).
+    and posterior information ``μ/S + information``; the bias follows by eq. (16). With a
+    ``restart``, the prior is first replaced by ``restart.apply(prior)``.
     """
 
     precision: np.ndarray
     information: np.ndarray
+    restart: Restart | None = None
 
     @staticmethod
     def from_posterior(prior: np.ndarray, mean_post: np.ndarray,
@@ -74,9 +102,12 @@ class AngleObservation:
 
         exp(-P (a + Δ)²/2 + I (a + Δ)) ∝ exp(-P a²/2 + (I - P Δ) a).
         """
-        return AngleObservation(self.precision, self.information - self.precision * angle_shift)
+        return AngleObservation(self.precision, self.information - self.precision * angle_shift,
+                                self.restart)
 
     def apply(self, prior: np.ndarray) -> np.ndarray:
+        if self.restart is not None:
+            prior = self.restart.apply(prior)
         s_prior = prior[VAR_A]
         safe = s_prior > 0
         inv_s = np.where(safe, 1.0 / np.where(safe, s_prior, 1.0), 0.0)

@@ -29,7 +29,7 @@ The state returns to ``tracking`` after ``recovered_after_images`` consistent im
 
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -103,6 +103,10 @@ class HealthParams:
     #: on in-out-in with a time-varying bias, the arm came back 150 mm from the estimate
     #: after 4 s out of view, and 50 particles put it behind the scene (0.8 m).
     reacquire_after_s: float = 1.0
+    #: The belief restarts from the encoders after the images have shown the estimate's
+    #: arm out of view, and the encoders' in view, for this long (s): see
+    #: ``ImageProcessor.restart_reason`` in ``core/pipeline.py``.
+    restart_after_misplaced_s: float = 1.0
 
     def validate(self) -> None:
         """Raises ValueError naming the field."""
@@ -112,6 +116,8 @@ class HealthParams:
             ("lost_after_images", self.lost_after_images >= 1, "must be >= 1"),
             ("recovered_after_images", self.recovered_after_images >= 1, "must be >= 1"),
             ("reacquire_after_s", self.reacquire_after_s > 0, "must be > 0"),
+            ("restart_after_misplaced_s", self.restart_after_misplaced_s >= 0,
+             "must be >= 0"),
         )
         for name, ok, why in checks:
             if not ok:
@@ -131,12 +137,35 @@ class TrackerHealth:
     #: Whether an image confirmed the estimate (``tracking``) within
     #: ``HealthParams.reacquire_after_s``: the tracker holds the arm.
     acquired: bool = False
+    #: Times the belief was restarted from the encoders (``ImageOutcome.restarted``).
+    restarts: int = 0
+    #: Since when the images have shown the estimate's arm out of view and the encoders'
+    #: in view (``is_misplaced``; inf: the latest image did not).
+    misplaced_since_s: float = float("inf")
 
 
-def next_health(health: TrackerHealth, image: ImageConsistency,
-                params: HealthParams) -> TrackerHealth:
+def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,
+                 params: HealthParams) -> bool:
+    """Whether an image finds the estimate's arm out of view (fewer than
+    ``min_robot_pixels`` rendered on valid pixels) and the encoders' arm (zero bias) in it."""
+    return estimate.robot_pixels < params.min_robot_pixels <= encoders.robot_pixels
+
+
+def restart_due(health: TrackerHealth, time_s: float, params: HealthParams) -> bool:
+    """Whether the estimate has been misplaced for ``restart_after_misplaced_s`` at
+    ``time_s`` (an image that is misplaced too)."""
+    return time_s - health.misplaced_since_s >= params.restart_after_misplaced_s
+
+
+def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthParams,
+                restarted: bool = False, misplaced: bool = False) -> TrackerHealth:
     """The health after one more image (a pure function, so the Drake system can keep
-    its state in the Context)."""
+    its state in the Context); ``restarted``: the belief was restarted from the encoders
+    before this image's update (``image`` then compares it with the restarted belief),
+    which forgets that the arm was acquired; ``misplaced``: see ``is_misplaced``."""
+    if restarted:
+        health = replace(health, confirmed_s=-float("inf"), disagreeing_in_a_row=0,
+                         restarts=health.restarts + 1)
     if image.visible_robot_pixels < params.min_robot_pixels:
         state = HealthState.LOST if health.state == HealthState.LOST else HealthState.UNCERTAIN
         bad, good = health.disagreeing_in_a_row, 0
@@ -152,4 +181,5 @@ def next_health(health: TrackerHealth, image: ImageConsistency,
             state = health.state
     confirmed = image.time_s if state == HealthState.TRACKING else health.confirmed_s
     acquired = image.time_s - confirmed <= params.reacquire_after_s
-    return TrackerHealth(state, image, bad, good, confirmed, acquired)
+    since = min(health.misplaced_since_s, image.time_s) if misplaced else float("inf")
+    return TrackerHealth(state, image, bad, good, confirmed, acquired, health.restarts, since)

@@ -17,16 +17,22 @@ The method's reference is ``docs/method.md``.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
+from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer, Restart
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
 from drake_tracker.core.depth_units import check_depth_units
 from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.health import ImageConsistency, TrackerHealth, image_consistency
+from drake_tracker.core.health import (
+    ImageConsistency,
+    TrackerHealth,
+    image_consistency,
+    is_misplaced,
+    restart_due,
+)
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import (
     MEAN_A,
@@ -108,6 +114,10 @@ class ImageOutcome:
     observation: AngleObservation | None
     result: CPFResult | None
     consistency: ImageConsistency | None
+    #: Whether the update restarted the belief from the encoders first (see ``observe``).
+    restarted: bool = False
+    #: Whether the estimate put the arm out of view and the encoders in it (``is_misplaced``).
+    misplaced: bool = False
 
 
 class ImageProcessor:
@@ -128,6 +138,9 @@ class ImageProcessor:
             biased &= np.array([name not in chain for name in model.joint_names])
         self._jump_rate = np.where(biased, [j.bias_jump_rate_per_s for j in noise], 0.0)
         self._jump_std = np.array([j.bias_jump_std_rad for j in noise])
+        self.restart = Restart(np.array([j.initial_angle_std_rad for j in noise]) ** 2,
+                               np.where([j.has_bias for j in noise],
+                                        [j.initial_bias_std_rad ** 2 for j in noise], 0.0))
         self.update = CpfImageUpdate(
             model, camera, blocks, im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
@@ -176,11 +189,14 @@ class ImageProcessor:
         return -np.expm1(-self._jump_rate * window)
 
     def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf,
-                acquired: bool = True) -> ImageOutcome:
+                health: TrackerHealth | None = None) -> ImageOutcome:
         """The image's observation relative to ``prior`` (None if it has no valid pixel),
         and its consistency with the estimate; ``elapsed_s`` is the time since the
-        previous applied image; until the arm is ``acquired`` (``TrackerHealth``), the
-        update searches with ``image.acquisition_num_particles``."""
+        previous applied image; ``health`` the tracker's before this image (default: it
+        holds the arm): until the arm is ``acquired``, the update searches with
+        ``image.acquisition_num_particles``."""
+        health = TrackerHealth(acquired=True) if health is None else health
+        acquired = health.acquired
         observation = self.update.prepare(frame.depth_m)
         check_depth_units(frame.depth_m)  # a millimetre image is an error, not a blank
         if observation.num_valid == 0:
@@ -191,6 +207,21 @@ class ImageProcessor:
         image = self.params.image
         predicted = image_consistency(self.image_time(frame), rendered,
                                       observed_image(observation), image.likelihood)
+        # Never lost for good: the belief restarts from the encoders (as at the tracker's
+        # start: see ``restart_reason``) before the update.
+        restarted, misplaced = False, False
+        if self.params.use_joint_readings:
+            candidate = self.restart.apply(prior)
+            rendered_enc = self.update.renderer.render(candidate[MEAN_A][None])[0]
+            encoders = image_consistency(predicted.time_s, rendered_enc,
+                                         observed_image(observation), image.likelihood)
+            misplaced = is_misplaced(predicted, encoders, self.params.health)
+            reason = self.restart_reason(predicted, encoders, health)
+            if reason:
+                log.warning("image %d at %.3f s: %s; the belief restarts from the encoders",
+                            frame.sequence, predicted.time_s, reason)
+                restarted, misplaced, acquired = True, False, False
+                prior, rendered, predicted = candidate, rendered_enc, encoders
         # Which pixels hide the robot is read at the prior mean: only meaningful while the
         # image does not contradict it. After a bias step, or from a wrong start, the true
         # arm in front of the prior's would be taken for an occluder, and the arm could then
@@ -207,7 +238,7 @@ class ImageProcessor:
         # sigmas) for 2.2 nats, kept for the rest of the occlusion (README, "A bias that
         # outlasts an occlusion").
         jumps = self.jump_probability(elapsed_s)
-        if predicted.visible_robot_pixels < self.params.health.min_robot_pixels:
+        if restarted or predicted.visible_robot_pixels < self.params.health.min_robot_pixels:
             jumps = np.zeros_like(jumps)
         result = self.update(prior, observation,
                              image_rng(self.params.image.seed, frame.sequence),
@@ -219,8 +250,44 @@ class ImageProcessor:
         # at the Monte-Carlo resolution of the prior.
         floor = np.maximum(prior[VAR_A] / self.update.num_particles, 1e-14)
         variance = np.maximum(result.variance, floor)
-        return ImageOutcome(AngleObservation.from_posterior(prior, result.mean, variance),
-                            result, predicted)
+        observation = AngleObservation.from_posterior(prior, result.mean, variance)
+        if restarted:
+            observation = replace(observation, restart=self.restart)
+        return ImageOutcome(observation, result, predicted, restarted, misplaced)
+
+    def restart_reason(self, estimate: ImageConsistency, encoders: ImageConsistency,
+                       health: TrackerHealth) -> str:
+        """Why an image restarts the belief from the encoders ("": it does not), given its
+        consistency with the estimate's arm and with the encoders' (zero bias):
+
+        * it contradicts the estimate, or cannot see it, while it agrees with the
+          encoders' arm, and on more pixels;
+        * the estimate has put the arm out of view while the encoders put it in view
+          (``is_misplaced``) for ``health.restart_after_misplaced_s``. Measured: a second
+          of images without the arm (the fault matrix's arm_out_of_view) moved the
+          estimate out of view, which explains them best, and then no image could bring
+          it back (840 mm 4 s after the arm returned).
+        """
+        if not self.consistent(estimate) and self.consistent(encoders) and (
+                agreeing_pixels(encoders) > agreeing_pixels(estimate)):
+            return "it agrees with the encoders' arm and not with the estimate"
+        if is_misplaced(estimate, encoders, self.params.health) and restart_due(
+                health, estimate.time_s, self.params.health):
+            return (f"the estimate has put the arm out of view since "
+                    f"{health.misplaced_since_s:.3f} s while the encoders put it in view")
+        return ""
+
+    def consistent(self, image: ImageConsistency) -> bool:
+        """Whether an image sees enough of the rendered arm and does not see through it
+        (the health's ``min_robot_pixels`` and ``max_see_through``)."""
+        health = self.params.health
+        return bool(image.visible_robot_pixels >= health.min_robot_pixels
+                    and image.see_through <= health.max_see_through)
+
+
+def agreeing_pixels(image: ImageConsistency) -> float:
+    """Robot pixels whose depth agrees with the rendered arm's."""
+    return image.agreement * image.robot_pixels
 
 
 

@@ -67,6 +67,7 @@ class CpfImageUpdateSystem(LeafSystem):
         if not period_s > 0:
             raise ValueError(f"CpfImageUpdateSystem: period_s must be > 0, got {period_s}")
         self.processor = ImageProcessor(model, camera, params)
+        self._period_s = float(period_s)
         self._health_params = params.health
         self._warnings = RateLimitedWarning(log)
         self._state = self.DeclareAbstractState(AbstractValue.Make(CpfState()))
@@ -97,8 +98,13 @@ class CpfImageUpdateSystem(LeafSystem):
             log.warning("camera sequence counter restarted: image %d after image %d; "
                         "frames are told apart by sequence and stamp", frame.sequence,
                         s.last_sequence)
-        elif s.last_sequence >= 0:  # frames that came and went between two checks
-            s.images_skipped += max(frame.sequence - s.last_sequence - 1, 0)
+        elif s.last_sequence >= 0 and frame.sequence - s.last_sequence > 1:
+            missed = frame.sequence - s.last_sequence - 1
+            s.images_skipped += missed
+            self._warnings.warn("frames never seen", (
+                f"{missed} frame(s) before image {frame.sequence} were never on the depth "
+                f"port when it was checked (every {self._period_s * 1e3:g} ms): dropped "
+                f"by the camera, or replaced by a newer one between two checks"))
         s.last_sequence, s.last_frame = frame.sequence, key
         if self._process(frame, self._prior_port.Eval(context), s):
             s.images_applied += 1
@@ -119,8 +125,7 @@ class CpfImageUpdateSystem(LeafSystem):
             s.next_image_due_s = self.processor.next_due(t, s.next_image_due_s)
         try:
             window = jump_window_s(t, s.last_applied_image_s, s.health)
-            outcome = self.processor.observe(frame, prior.anchor.prior, window,
-                                             s.health.acquired)
+            outcome = self.processor.observe(frame, prior.anchor.prior, window, s.health)
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(frame, f"{type(err).__name__}: {err}")
         if outcome.observation is None:
@@ -128,7 +133,8 @@ class CpfImageUpdateSystem(LeafSystem):
         s.message = ImageObservationMessage(s.message.id + 1, frame.sequence,
                                             prior.image_time_s, outcome.observation,
                                             prior.anchor)
-        s.health = next_health(s.health, outcome.consistency, self._health_params)
+        s.health = next_health(s.health, outcome.consistency, self._health_params,
+                               outcome.restarted, outcome.misplaced)
         s.last_applied_image_s = max(t, s.last_applied_image_s)
         return True
 

@@ -1,0 +1,149 @@
+"""Never lost for good: a belief that the images show wrong restarts from the encoders.
+
+The estimate below puts the arm out of the camera's view (a 100 deg bias on the shoulder)
+while the encoders, and the image, show it in view. The out-of-view estimate explains
+nothing and contradicts nothing, so no image update can move it; the restart is what
+brings it back.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.belief_buffer import AngleObservation, Restart
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.health import (
+    HealthParams,
+    ImageConsistency,
+    TrackerHealth,
+    next_health,
+    restart_due,
+)
+from drake_tracker.core.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.pipeline import (
+    ImageProcessor,
+    PoseReadout,
+    full_reading,
+    make_bank_and_prior,
+)
+from drake_tracker.core.renderer import default_view_configuration, make_renderer
+from drake_tracker.metrics import pose_errors
+from drake_tracker.params import TrackerParams
+from drake_tracker.robot import build_tracker_model, robot_preset
+
+CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
+SHOULDER_BIAS_RAD = np.radians(100.0)
+
+
+def test_restart_forgets_the_bias_and_commutes_with_an_angle_shift():
+    rng = np.random.default_rng(0)
+    prior = np.abs(rng.normal(size=(5, 4))) * 0.1
+    prior[MEAN_B] = [0.3, -0.2, 0.0, 0.1]
+    restart = Restart(np.full(4, 0.02**2), np.array([0.1, 0.1, 0.0, 0.1]) ** 2)
+    out = restart.apply(prior)
+    np.testing.assert_array_equal(out[MEAN_A], prior[MEAN_A] + prior[MEAN_B])
+    np.testing.assert_array_equal(out[MEAN_B], 0.0)
+    np.testing.assert_array_equal(out[COV_AB], 0.0)
+    np.testing.assert_array_equal(out[VAR_A], restart.angle_var)
+    np.testing.assert_array_equal(out[VAR_B], restart.bias_var)
+    # An observation stored at an anchor, of the angles there plus a shift, gives the
+    # same posterior as the observation applied at the image time.
+    shift = rng.normal(size=4) * 0.05
+    observation = AngleObservation(np.full(4, 50.0), rng.normal(size=4), restart)
+    at_image = prior.copy()
+    at_image[MEAN_A] += shift
+    via_anchor = observation.shifted(shift).apply(prior)
+    direct = observation.apply(at_image)
+    np.testing.assert_allclose(via_anchor[MEAN_A] + shift, direct[MEAN_A], atol=1e-12)
+    np.testing.assert_allclose(via_anchor[1:], direct[1:], atol=1e-12)
+
+
+def test_health_counts_misplaced_time_and_a_restart_resets_it():
+    params = HealthParams(restart_after_misplaced_s=1.0)
+    unseen = ImageConsistency(0.0, 0, 0.0, 0.0)
+    health = TrackerHealth()
+    for t in (0.0, 0.5, 0.9):
+        health = next_health(health, replace(unseen, time_s=t), params, misplaced=True)
+    assert health.misplaced_since_s == 0.0
+    assert not restart_due(health, 0.99, params) and restart_due(health, 1.0, params)
+    restarted = next_health(health, replace(unseen, time_s=1.0), params, restarted=True)
+    assert restarted.restarts == 1 and restarted.misplaced_since_s == np.inf
+    assert not restarted.acquired
+    # One image that is not misplaced ends the count.
+    assert next_health(health, unseen, params).misplaced_since_s == np.inf
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """Apollo in view and its depth image."""
+    model = build_tracker_model(robot_preset("apollo"))
+    truth = default_view_configuration(model)
+    rendered = make_renderer(model, CAMERA).render(truth[None])[0].astype(float)
+    noise = np.random.default_rng(5).normal(0, 0.002, rendered.shape)
+    image = (np.where(np.isfinite(rendered), rendered, 2.5) + noise).astype(np.float32)
+    return model, truth, DepthFrame(5.0, 5.05, image, 7)
+
+
+def out_of_view_prior(model, truth, encoder_bias_rad: np.ndarray) -> np.ndarray:
+    """A belief whose arm is out of view (100 deg more on the shoulder, explained as bias)
+    while the encoders read ``truth + encoder_bias_rad`` (robot joints)."""
+    robot = [model.joint_names.index(n) for n in model.robot_joint_names]
+    reading = truth[robot] + encoder_bias_rad
+    _, prior = make_bank_and_prior(model, TrackerParams(), reading)
+    prior[MEAN_A] = full_reading(model, reading)
+    shoulder = model.joint_names.index("arm_joint_1")
+    prior[MEAN_A, shoulder] += SHOULDER_BIAS_RAD
+    prior[MEAN_B, shoulder] -= SHOULDER_BIAS_RAD
+    prior[VAR_A] = np.radians(1.0) ** 2
+    return prior
+
+
+def hand_error_mm(model, truth, q) -> float:
+    X_CE = PoseReadout(model).poses(np.array([truth, q]))[0]
+    return float(pose_errors(X_CE[1:], X_CE[:1])[0][0])
+
+
+def test_an_image_that_agrees_with_the_encoders_and_not_the_estimate_restarts_it(scene):
+    model, truth, frame = scene
+    prior = out_of_view_prior(model, truth, np.zeros(len(model.robot_joint_names)))
+    assert hand_error_mm(model, truth, prior[MEAN_A]) > 300.0
+    processor = ImageProcessor(model, CAMERA, TrackerParams())
+    outcome = processor.observe(frame, prior, 0.1, TrackerHealth(acquired=True))
+    assert outcome.restarted and outcome.observation.restart is processor.restart
+    post = outcome.observation.apply(prior)
+    assert hand_error_mm(model, truth, post[MEAN_A]) < 10.0
+    assert np.all(post[MEAN_B] == 0.0)  # the bias was forgotten, not explained
+    health = next_health(TrackerHealth(acquired=True), outcome.consistency,
+                         TrackerParams().health, outcome.restarted, outcome.misplaced)
+    assert health.restarts == 1 and not health.acquired
+
+
+def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough(scene):
+    """The encoders are -6 deg off on arm joints 2 and 4 (the image sees through 42 % of
+    their arm): the out-of-view estimate stays until ``restart_after_misplaced_s``."""
+    model, truth, frame = scene
+    bias = np.zeros(len(model.robot_joint_names))
+    bias[[model.robot_joint_names.index(n) for n in ("arm_joint_2", "arm_joint_4")]] = \
+        np.radians(-6.0)
+    prior = out_of_view_prior(model, truth, bias)
+    processor = ImageProcessor(model, CAMERA, TrackerParams())
+    encoders = processor.restart.apply(prior)[MEAN_A]
+    before = hand_error_mm(model, truth, encoders)
+    assert before > 30.0
+    # Not due yet: the image cannot move the estimate, and says it is misplaced.
+    fresh = processor.observe(frame, prior, 0.1, TrackerHealth(acquired=True))
+    assert fresh.misplaced and not fresh.restarted
+    assert fresh.consistency.robot_pixels < TrackerParams().health.min_robot_pixels
+    stuck = hand_error_mm(model, truth, fresh.observation.apply(prior)[MEAN_A])
+    assert stuck > 300.0
+    # Misplaced since 1 s before this image: the update starts from the encoders (one
+    # image from there is not an acquisition: here it ends 51 mm off, from 42).
+    due = TrackerHealth(acquired=True, misplaced_since_s=frame.capture_time_s - 1.0)
+    outcome = processor.observe(frame, prior, 0.1, due)
+    assert outcome.restarted and not outcome.misplaced
+    assert not processor.consistent(outcome.consistency)  # the encoders' arm disagreed
+    post = outcome.observation.apply(prior)
+    assert hand_error_mm(model, truth, post[MEAN_A]) < 1.5 * before < 0.25 * stuck
+    assert np.all(post[MEAN_B] == 0.0)
