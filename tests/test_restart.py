@@ -18,6 +18,7 @@ from drake_tracker.core.health import (
     HealthParams,
     ImageConsistency,
     TrackerHealth,
+    is_misplaced,
     next_health,
     restart_due,
 )
@@ -73,6 +74,17 @@ def test_health_counts_misplaced_time_and_a_restart_resets_it():
     assert not restarted.acquired
     # One image that is not misplaced ends the count.
     assert next_health(health, unseen, params).misplaced_since_s == np.inf
+
+
+def test_an_estimate_that_renders_under_half_the_encoders_arm_is_misplaced():
+    params = HealthParams()  # min_robot_pixels 30, misplaced_fraction 0.5
+    seen = [ImageConsistency(0.0, n, 1.0, 0.0) for n in (0, 29, 343, 390, 600)]
+    encoders = ImageConsistency(0.0, 782, 0.0, 0.5)
+    assert [is_misplaced(e, encoders, params) for e in seen] == [True] * 4 + [False]
+    few = ImageConsistency(0.0, 40, 0.0, 0.5)  # the encoders' arm barely in view
+    assert [is_misplaced(e, few, params) for e in seen] == [True, True, False, False, False]
+    none = ImageConsistency(0.0, 29, 0.0, 0.5)  # out of view: nothing to compare with
+    assert not any(is_misplaced(e, none, params) for e in seen)
 
 
 @pytest.fixture(scope="module")
