@@ -145,6 +145,10 @@ class ImageParams:
     #: misaligned arm by looking away from it (an unrendered robot scores 0 per pixel,
     #: a misaligned one less): 300 mm from then on.
     bias_jumps_in_camera_chain: bool = False
+    #: A joint's bias jump is looked for only on an image with at least this many valid
+    #: pixels that a jump of it (either way, by its std) would change, at the prior mean
+    #: (``core/jump_visibility.py``; 0: always).
+    min_jump_pixels: int = 5
     #: Seed of the particle filter's random numbers (one stream per image sequence).
     seed: int = 0
     likelihood: LikelihoodParams = field(default_factory=LikelihoodParams)
@@ -264,6 +268,7 @@ def validate_tracker_params(params: TrackerParams) -> None:
         validate_joint_noise(noise, f"kalman.overrides[{name}]")
     im = params.image
     _check(im.num_particles >= 1, "image.num_particles", im.num_particles, "must be >= 1")
+    _check(im.min_jump_pixels >= 0, "image.min_jump_pixels", im.min_jump_pixels, "must be >= 0")
     _check(im.acquisition_num_particles >= 0, "image.acquisition_num_particles",
            im.acquisition_num_particles, "must be >= 0 (0: image.num_particles)")
     _check(im.blocks in BLOCK_MODES or im.blocks == "explicit", "image.blocks", im.blocks,

@@ -270,7 +270,7 @@ OUT_OF_VIEW_XFAIL = pytest.mark.xfail(strict=True, reason=(
     "0.25 s the estimate jumps to put the arm out of view (570 mm). The belief restarts "
     "from the encoders after 1 s of that (at 3.16 s and 4.46 s), but the search from "
     "encoders 8.6 deg off on every arm joint ends in a wrong configuration that the images "
-    "agree with (290-370 mm at 5-7 s; 860 mm without the restart)"))
+    "agree with (190-340 mm at 5-7 s; 860 mm without the restart)"))
 FAULTS = [no_images, pytest.param(arm_out_of_view, marks=OUT_OF_VIEW_XFAIL), full_occlusion,
           no_readings, nan_burst, glitched_stamp, clock_step(-1.0), clock_step(+1.0),
           clock_step(+200.0), images_out_of_order, burst_after_stall, bad_images("all NaN"),

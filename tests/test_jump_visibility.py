@@ -1,0 +1,67 @@
+"""A bias jump is looked for only on a joint whose move the image would see."""
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.jump_visibility import changed_visible_pixels, jump_testable
+from drake_tracker.core.likelihood import LikelihoodParams
+from drake_tracker.core.renderer import default_view_configuration, make_renderer
+from drake_tracker.robot import build_tracker_model, robot_preset
+
+CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
+PARAMS = LikelihoodParams()
+
+
+def test_changed_pixels_count_only_what_the_image_sees():
+    base = np.full((4, 5), np.inf)
+    base[1:3, 1:3] = 1.0  # a 2x2 robot at 1 m
+    moved = np.full((4, 5), np.inf)
+    moved[1:3, 2:4] = 1.0  # moved one column right: 2 pixels lost, 2 gained
+    deeper = base.copy()
+    deeper[1, 1] = 1.001  # within 3 sigma: no change
+    deeper[2, 2] = 1.2
+    observed = np.where(np.isfinite(base), base, 2.0)
+    counts = changed_visible_pixels(base, np.stack([moved, deeper, base]), observed, PARAMS)
+    np.testing.assert_array_equal(counts, [4, 1, 0])
+    # An occluder in front of both renderings hides the change; invalid pixels say nothing.
+    occluded = observed.copy()
+    occluded[:, 1] = 0.5
+    invalid = observed.copy()
+    invalid[:, 3] = np.nan
+    assert changed_visible_pixels(base, moved[None], occluded, PARAMS)[0] == 2
+    # Unless nearer is not an occluder (an image that contradicts the belief).
+    assert changed_visible_pixels(base, moved[None], occluded, PARAMS, occluders=False)[0] == 4
+    assert changed_visible_pixels(base, moved[None], invalid, PARAMS)[0] == 2
+
+
+@pytest.fixture(scope="module")
+def apollo_view():
+    model = build_tracker_model(robot_preset("apollo"))
+    renderer = make_renderer(model, CAMERA)
+    mean = default_view_configuration(model)
+    base = renderer.render(mean[None])[0].astype(float)
+    return model, renderer, mean, base
+
+
+def test_a_joint_whose_move_is_hidden_cannot_test_a_jump(apollo_view):
+    model, renderer, mean, base = apollo_view
+    shoulder, elbow = (model.joint_names.index(n) for n in ("arm_joint_2", "arm_joint_4"))
+    joints = np.array([shoulder, elbow])
+    step = np.full(len(mean), np.radians(8.6))
+    clear = np.where(np.isfinite(base), base, 2.5)
+    assert jump_testable(renderer, mean, joints, step, base, clear, PARAMS, 30).tolist() == [
+        True, True]
+    # Something 0.3 m from the camera in front of every pixel the elbow's move changes.
+    q = np.repeat(mean[None], 2, axis=0)
+    q[:, elbow] += [step[elbow], -step[elbow]]
+    moved = renderer.render(q).astype(float)
+    both = np.isfinite(moved) & np.isfinite(base)[None]
+    gap = np.abs(np.where(both, moved, 0.0) - np.where(both, base[None], 0.0))
+    forearm = np.any((np.isfinite(moved) != np.isfinite(base)[None]) | (gap > 0.01), axis=0)
+    hidden = np.where(forearm, 0.3, clear)
+    testable = jump_testable(renderer, mean, joints, step, base, hidden, PARAMS, 30)
+    assert testable.tolist() == [True, False]
+    # Nothing to see at all: no joint can be tested.
+    wall = np.full_like(clear, 0.3)
+    assert not jump_testable(renderer, mean, joints, step, base, wall, PARAMS, 30).any()
