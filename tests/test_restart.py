@@ -10,6 +10,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from fast_params import small_params
+from test_timestamps import assert_same_when_settled, feed, simulate
 
 from drake_tracker.core.belief_buffer import AngleObservation, Restart
 from drake_tracker.core.camera import CameraIntrinsics
@@ -33,6 +35,8 @@ from drake_tracker.core.renderer import default_view_configuration, make_rendere
 from drake_tracker.metrics import pose_errors
 from drake_tracker.params import TrackerParams
 from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.synthetic import synthetic_run
+from drake_tracker.tracker import Tracker
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 SHOULDER_BIAS_RAD = np.radians(100.0)
@@ -159,3 +163,19 @@ def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough
     post = outcome.observation.apply(prior)
     assert hand_error_mm(model, truth, post[MEAN_A]) < 1.5 * before < 0.25 * stuck
     assert np.all(post[MEAN_B] == 0.0)
+
+
+def test_a_restart_gives_the_same_estimates_offline_and_in_the_diagram(apollo):
+    """The restart travels in the image's observation through the Diagram's delay buffer
+    as through the offline tracker's. Forced here: every image whose estimate renders
+    under 99 % of the encoders' arm restarts (the run's arm has a constant bias)."""
+    run = synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7,
+                        bias_rad=np.radians(4.0))
+    p = small_params()
+    p.health.misplaced_fraction, p.health.restart_after_misplaced_s = 0.99, 0.0
+    offline_tracker = Tracker(apollo, run.camera_intrinsics, p)
+    offline, applied = feed(offline_tracker, run)
+    assert offline_tracker.health.restarts >= 1
+    diagram, images_applied = simulate(apollo, run, p)
+    assert images_applied == sum(applied.values())
+    assert_same_when_settled(run, diagram, offline)
