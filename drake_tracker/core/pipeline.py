@@ -139,9 +139,10 @@ class ImageProcessor:
             biased &= np.array([name not in chain for name in model.joint_names])
         self._jump_rate = np.where(biased, [j.bias_jump_rate_per_s for j in noise], 0.0)
         self._jump_std = np.array([j.bias_jump_std_rad for j in noise])
-        self.restart = Restart(np.array([j.initial_angle_std_rad for j in noise]) ** 2,
-                               np.where([j.has_bias for j in noise],
-                                        [j.initial_bias_std_rad ** 2 for j in noise], 0.0))
+        start = initial_moments(np.zeros(len(noise)), [j.initial_angle_std_rad for j in noise],
+                                [j.initial_bias_std_rad for j in noise],
+                                [j.has_bias for j in noise])
+        self.restart = Restart(start[VAR_A], start[VAR_B])  # the variances of the start
         self.update = CpfImageUpdate(
             model, camera, blocks, im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
@@ -206,16 +207,17 @@ class ImageProcessor:
         # state, and which of the robot's pixels are hidden behind something.
         rendered = self.update.renderer.render(prior[MEAN_A][None])[0]
         image = self.params.image
-        predicted = image_consistency(self.image_time(frame), rendered,
-                                      observed_image(observation), image.likelihood)
+        observed = observed_image(observation)  # z and valid pixels: occlusion keeps them
+        predicted = image_consistency(self.image_time(frame), rendered, observed,
+                                      image.likelihood)
         # Never lost for good: the belief restarts from the encoders (as at the tracker's
         # start: see ``restart_reason``) before the update.
         restarted, misplaced = False, False
         if self.params.use_joint_readings:
             candidate = self.restart.apply(prior)
             rendered_enc = self.update.renderer.render(candidate[MEAN_A][None])[0]
-            encoders = image_consistency(predicted.time_s, rendered_enc,
-                                         observed_image(observation), image.likelihood)
+            encoders = image_consistency(predicted.time_s, rendered_enc, observed,
+                                         image.likelihood)
             misplaced = is_misplaced(predicted, encoders, self.params.health)
             reason = self.restart_reason(predicted, encoders, health)
             if reason:
@@ -248,7 +250,7 @@ class ImageProcessor:
             # default scenario, health tracking on what was still rendered).
             joints = np.flatnonzero(jumps > 0)
             testable = jump_testable(self.update.renderer, prior[MEAN_A], joints,
-                                     self._jump_std, rendered, observed_image(observation),
+                                     self._jump_std, rendered, observed,
                                      image.likelihood, image.min_jump_pixels,
                                      self.consistent(predicted))
             jumps[joints[~testable]] = 0.0
