@@ -15,6 +15,8 @@ Keys of ``bench.json``:
 * ``image_updates_per_s_2000_1_thread`` / ``..._2_threads``: the bench robot's;
 * ``cad_over_bench_cost_per_evaluation``: fused evaluation cost, CAD robot / bench robot;
 * ``image_updates_per_s_default``: the bench robot with the default parameters;
+* ``image_updates_per_s_coarse_sweeps``: the same with ``COARSE_SWEEPS`` (the three
+  tempered sweeps on a 2x coarser image: faster, less robust; see the README);
 * ``kf_step_us``: one predict+update of the whole bank (15 joints);
 * ``replay_us_per_reading``: re-filtering one buffered reading after a delayed image;
 * ``demo``: the demo's real-time factor (simulated seconds per wall-clock second) on the
@@ -43,6 +45,9 @@ from drake_tracker.core.pipeline import camera_chain_joints
 from drake_tracker.params import TrackerParams, resolve_blocks, resolve_kalman_params
 from drake_tracker.robot import build_tracker_model, robot_preset
 
+#: The coarse-sweep setting the bench times beside the defaults (``image`` parameters).
+COARSE_SWEEPS = {"sweep_image_widths_px": [40, 40, 40, 80]}
+
 
 def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,
                        num_particles: int, repeats: int) -> dict:
@@ -52,7 +57,8 @@ def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,
     blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
     update = CpfImageUpdate(model, camera, blocks, num_particles, params.image.likelihood,
                             params.image.image_width_px, params.image.max_kl,
-                            annealing_betas=tuple(params.image.annealing_betas))
+                            annealing_betas=tuple(params.image.annealing_betas),
+                            sweep_image_widths_px=tuple(params.image.sweep_image_widths_px))
     timed = time_updates(update, test_observation(update), tracking_prior(model), repeats)
     return {"evaluations": update.evaluations_per_image, **timed}
 
@@ -138,6 +144,11 @@ def run_benchmarks(quick: bool = False) -> dict:
                for name, model in robots.items()}
     default = bench_image_update(apollo, camera, params, params.image.num_particles,
                                  repeats)
+    coarse_params = TrackerParams()
+    for name, value in COARSE_SWEEPS.items():
+        setattr(coarse_params.image, name, value)
+    coarse = bench_image_update(apollo, camera, coarse_params, params.image.num_particles,
+                                repeats)
     kalman = bench_kalman(apollo, params)
     demo = bench_demo(params, 2.0 if quick else 4.0)
     bench, cad = results["apollo"], results["apollo_cad"]
@@ -154,6 +165,7 @@ def run_benchmarks(quick: bool = False) -> dict:
                                                / bench["stage_us_per_evaluation"]["score"]),
         "image_updates_per_s_default": default["updates_per_s"],
         "evaluations_default": default["evaluations"],
+        "image_updates_per_s_coarse_sweeps": coarse["updates_per_s"],
         "kf_step_us": kalman["kf_step_us"],
         "replay_us_per_reading": kalman["replay_us_per_reading"],
         "demo": demo,
@@ -211,7 +223,8 @@ def format_bench(result: dict) -> str:
         f"CAD robot / bench robot cost per evaluation: "
         f"{result['cad_over_bench_cost_per_evaluation']:.2f}   (target <= 2)",
         f"image updates/s, defaults ({result['evaluations_default']} evaluations): "
-        f"{result['image_updates_per_s_default']:.2f}",
+        f"{result['image_updates_per_s_default']:.2f}; tempered sweeps at 40 px: "
+        f"{result['image_updates_per_s_coarse_sweeps']:.2f}",
         f"Kalman bank step: {result['kf_step_us']:.2f} us   (target <= 20)",
         f"replay: {result['replay_us_per_reading']:.2f} us per re-filtered reading",
     ]

@@ -53,7 +53,8 @@ def make_update(model, camera: CameraIntrinsics, params: TrackerParams,
     particles = int(np.ceil(evaluations / (len(blocks) * layers)))
     return CpfImageUpdate(model, camera, blocks, particles, params.image.likelihood,
                           params.image.image_width_px, params.image.max_kl,
-                          annealing_betas=tuple(params.image.annealing_betas))
+                          annealing_betas=tuple(params.image.annealing_betas),
+                          sweep_image_widths_px=tuple(params.image.sweep_image_widths_px))
 
 
 def test_observation(update: CpfImageUpdate):

@@ -121,6 +121,10 @@ class ImageParams:
     annealing_betas: list[float] = field(default_factory=lambda: [0.003, 0.03, 0.3, 1.0])
     #: Images are subsampled to about this width (px) before the update (docs/method.md §4).
     image_width_px: int = 80
+    #: Per annealing sweep, the width (px) of the image it scores, e.g. [20, 20, 80, 80]:
+    #: the tempered sweeps only place the last one's particles (docs/method.md §4). The
+    #: last must be image_width_px; empty = image_width_px for every sweep.
+    sweep_image_widths_px: list[int] = field(default_factory=list)
     #: Subtracted from each image's capture stamp to get its time t' (s).
     image_time_offset_s: float = 0.0
     #: Images closer than this to the previously processed one are skipped (s); 0 = all.
@@ -284,6 +288,11 @@ def validate_tracker_params(params: TrackerParams) -> None:
            and betas == sorted(betas), "image.annealing_betas", betas,
            "must increase within (0, 1] and end at 1.0")
     _check(im.image_width_px >= 1, "image.image_width_px", im.image_width_px, "must be >= 1")
+    _check(not im.sweep_image_widths_px or (
+        len(im.sweep_image_widths_px) == len(betas) and min(im.sweep_image_widths_px) >= 1
+        and im.sweep_image_widths_px[-1] == im.image_width_px), "image.sweep_image_widths_px",
+        im.sweep_image_widths_px, "must be empty, or one width >= 1 per annealing sweep "
+        "ending with image.image_width_px")
     _check(math.isfinite(im.image_time_offset_s), "image.image_time_offset_s",
            im.image_time_offset_s, "must be finite")
     _check(im.min_image_interval_s >= 0, "image.min_image_interval_s",

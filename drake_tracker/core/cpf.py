@@ -211,6 +211,7 @@ def annealed_coordinate_particle_filter(
     jump_probability: np.ndarray | None = None,
     jump_std: np.ndarray | None = None,
     proposal_jump_fraction: float = 0.25,
+    sweep_log_likelihoods: Sequence[Callable[[np.ndarray], np.ndarray] | None] = (),
 ) -> CPFResult:
     """CPF sweeps towards prior x likelihood^beta, for ``betas`` increasing to 1.
 
@@ -231,6 +232,12 @@ def annealed_coordinate_particle_filter(
     prior has one), so that a jump the image supports is found; importance weights keep
     the answer that of the prior.
 
+    ``sweep_log_likelihoods`` (empty, or one per beta) may replace ``log_likelihood`` in
+    the sweeps with beta < 1 by a cheaper approximation (e.g. a coarser image); None
+    entries keep it. Those sweeps only place the last sweep's proposal, which is weighted
+    against the prior with ``log_likelihood`` itself (its entry must be None), so the
+    answer still estimates prior x likelihood.
+
     Why sweep more than once: the pixel likelihood is so peaked that one sweep, sampling
     block after block while the later blocks sit at a prior mean several degrees off,
     lets the early blocks absorb the later blocks' error; tempered sweeps first find the
@@ -247,6 +254,10 @@ def annealed_coordinate_particle_filter(
     if not 0 <= proposal_jump_fraction < 1:
         raise ValueError(f"proposal_jump_fraction must be in [0, 1), got "
                          f"{proposal_jump_fraction}")
+    sweeps = list(sweep_log_likelihoods) or [None] * len(betas)
+    if len(sweeps) != len(betas) or sweeps[-1] is not None:
+        raise ValueError("sweep_log_likelihoods: one per beta, the last None (the exact "
+                         "likelihood scores the last sweep)")
     prior_mean = np.asarray(prior_mean, float)
     prior_std = np.asarray(prior_std, float)
     zero = np.zeros_like(prior_mean)
@@ -262,8 +273,8 @@ def annealed_coordinate_particle_filter(
         if beta == 1.0:
             scored = log_likelihood
         else:
-            def scored(q, beta=beta):
-                return beta * np.asarray(log_likelihood(q), float)
+            def scored(q, beta=beta, tempered=sweeps[layer] or log_likelihood):
+                return beta * np.asarray(tempered(q), float)
         is_prior = layer == 0 and not prior.has_jumps
         result = coordinate_particle_filter(prior_mean, prior_std, blocks, num_particles,
                                             scored, rng, max_kl, prior,

@@ -21,6 +21,7 @@ from drake_tracker.core.kalman import MEAN_A, VAR_A
 from drake_tracker.core.likelihood import (
     LikelihoodParams,
     PreparedObservation,
+    coarser_observation,
     prepare_observation,
 )
 from drake_tracker.core.renderer import make_renderer
@@ -73,12 +74,17 @@ class CpfImageUpdate:
         annealing_betas: likelihood exponents of successive CPF sweeps, ending at 1
             (``(1,)``: the paper's single sweep); see
             :func:`~drake_tracker.core.cpf.annealed_coordinate_particle_filter`.
+        sweep_image_widths_px: per annealing sweep (empty: all at ``image_width_px``),
+            the width (px) its image is subsampled to, a whole multiple of the stride
+            coarser; a coarser sweep's log-likelihoods are scaled by the ratio of valid
+            pixels. The last sweep (beta = 1) must score the ``image_width_px`` image.
     """
 
     def __init__(self, model, camera: CameraIntrinsics, blocks: list[np.ndarray],
                  num_particles: int, likelihood: LikelihoodParams, image_width_px: int = 80,
                  max_kl: float = 2.0, renderer: str = "batched", near_m: float = 0.1,
-                 far_m: float = 6.0, annealing_betas: tuple[float, ...] = (1.0,)):
+                 far_m: float = 6.0, annealing_betas: tuple[float, ...] = (1.0,),
+                 sweep_image_widths_px: tuple[int, ...] = ()):
         likelihood.validate()
         if num_particles < 1:
             raise ValueError(f"num_particles must be >= 1, got {num_particles}")
@@ -96,6 +102,20 @@ class CpfImageUpdate:
         self.max_kl = float(max_kl)
         self.annealing_betas = tuple(float(b) for b in annealing_betas)
         self.renderer = make_renderer(model, self.intrinsics, renderer, near_m, far_m)
+        widths = tuple(sweep_image_widths_px) or (image_width_px,) * len(annealing_betas)
+        if len(widths) != len(self.annealing_betas) or min(widths) < 1:
+            raise ValueError(f"sweep_image_widths_px {list(widths)}: one width >= 1 per "
+                             f"annealing sweep ({len(self.annealing_betas)})")
+        #: Per sweep, how many times coarser than the update's image it scores.
+        self.sweep_factors = tuple(
+            max(1, round(stride_for_width(camera.width, w) / self.stride)) for w in widths)
+        if self.sweep_factors[-1] != 1:
+            raise ValueError(f"sweep_image_widths_px {list(widths)}: the last sweep must "
+                             f"score the {self.intrinsics.width} px image")
+        self.sweep_renderers = {f: make_renderer(model, camera.subsampled(self.stride * f),
+                                                 renderer, near_m, far_m)
+                                for f in set(self.sweep_factors) if f > 1}
+        self.sweep_renderers[1] = self.renderer
         self.times = StageTimes()
 
     @property
@@ -107,23 +127,27 @@ class CpfImageUpdate:
         depth = check_depth_image(depth, self.camera)
         return prepare_observation(subsample(depth, self.stride), self.likelihood)
 
-    def log_likelihood(self, q: np.ndarray, observation: PreparedObservation) -> np.ndarray:
-        """(N,) log-likelihoods of configurations q (N, n) for one observation."""
+    def log_likelihood(self, q: np.ndarray, observation: PreparedObservation,
+                       renderer=None) -> np.ndarray:
+        """(N,) log-likelihoods of configurations q (N, n) for one observation (prepared
+        at the size ``renderer`` renders, by default ``self.renderer``)."""
         t0 = time.perf_counter()
-        out = self.renderer.score(q, observation)  # FK + render + pixel likelihood
+        renderer = renderer or self.renderer
+        out = renderer.score(q, observation)  # FK + render + pixel likelihood
         self.times.render_s += time.perf_counter() - t0
         self.times.evaluations += len(q)
         return out
 
     def __call__(self, prior: np.ndarray, observation: PreparedObservation,
                  rng: np.random.Generator, jump_probability: np.ndarray | None = None,
-                 jump_std: np.ndarray | None = None, num_particles: int | None = None
-                 ) -> CPFResult | None:
+                 jump_std: np.ndarray | None = None, num_particles: int | None = None,
+                 coarse_sweeps: bool = True) -> CPFResult | None:
         """Angle marginals after the image, or None for an image with no valid pixel.
 
         ``jump_probability``/``jump_std`` (n,) let the prior of each angle admit a jump
         (a bias step since the previous image; see ``core/cpf.py``); ``num_particles``
-        overrides the particles per block for this image."""
+        overrides the particles per block for this image; ``coarse_sweeps`` False scores
+        every sweep at full resolution (the tracker's start-up search)."""
         if observation.num_valid == 0:
             return None
         t0 = time.perf_counter()
@@ -133,10 +157,32 @@ class CpfImageUpdate:
             num_particles or self.num_particles,
             lambda q: self.log_likelihood(q, observation), rng,
             self.max_kl, self.annealing_betas, jump_probability=jump_probability,
-            jump_std=jump_std)
+            jump_std=jump_std,
+            sweep_log_likelihoods=self._sweep_scores(observation) if coarse_sweeps else ())
         total = time.perf_counter() - t0
         self.times.filter_s += total - (self.times.render_s + self.times.likelihood_s
                                         - eval_before)
         self.times.updates += 1
         self.times.per_update.append(total)
         return result
+
+    def _sweep_scores(self, observation: PreparedObservation) -> list:
+        """Per sweep, the log-likelihood of its coarser image scaled to the valid pixels
+        of ``observation``, or None where it scores ``observation`` itself."""
+        scores = []
+        coarse_by_factor = {}
+        for factor in self.sweep_factors:
+            if factor not in coarse_by_factor:
+                coarse = coarser_observation(observation, factor)
+                coarse_by_factor[factor] = coarse if coarse.num_valid else None
+            coarse = coarse_by_factor[factor]
+            if factor == 1 or coarse is None:
+                scores.append(None)
+                continue
+            scale = observation.num_valid / coarse.num_valid
+
+            def scored(q, coarse=coarse, scale=scale, renderer=self.sweep_renderers[factor]):
+                return scale * self.log_likelihood(q, coarse, renderer)
+
+            scores.append(scored)
+        return scores

@@ -19,6 +19,7 @@ invalid pixels (NaN, <= 0, > Z_max) score 0. A particle's log-likelihood is the 
 """
 
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -137,6 +138,29 @@ def prepare_observation(depth: np.ndarray, params: LikelihoodParams) -> Prepared
         uniform=w / params.max_depth_m, occluder_rate_per_m=float(lam),
         occlusion_probability=float(params.occlusion_probability),
         truncation=params.truncation)
+
+
+def coarser_observation(observation: PreparedObservation,
+                        factor: int) -> PreparedObservation:
+    """``observation`` subsampled again: its pixels (factor*i, factor*j), with their
+    per-pixel constants as they are (a per-pixel occlusion estimate included). Equal to
+    preparing the image subsampled ``factor`` times more coarsely."""
+    if factor < 1:
+        raise ValueError(f"coarsening factor must be >= 1, got {factor}")
+    if factor == 1:
+        return observation
+    height, width = observation.shape
+    rows, cols = np.divmod(observation.pixel_index, width)
+    kept = np.flatnonzero((rows % factor == 0) & (cols % factor == 0))
+    shape = (-(-height // factor), -(-width // factor))
+    index = (rows[kept] // factor) * shape[1] + cols[kept] // factor
+    slot = np.full(shape[0] * shape[1], -1, dtype=np.int64)
+    slot[index] = np.arange(index.size)
+    per_pixel = {name: getattr(observation, name)[kept] for name in (
+        "z", "sigma", "gauss_coeff", "occ_coeff", "log_p_occ_inf", "inv_sigma",
+        "lam_sigma2")}
+    return dataclasses.replace(observation, pixel_index=index, shape=shape,
+                               pixel_slot=slot, **per_pixel)
 
 
 @numba.njit(parallel=True, cache=True)

@@ -146,7 +146,7 @@ class ImageProcessor:
         self.update = CpfImageUpdate(
             model, camera, blocks, im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
-            tuple(im.annealing_betas))
+            tuple(im.annealing_betas), tuple(im.sweep_image_widths_px))
 
     def image_time(self, frame: DepthFrame) -> float:
         return image_time(frame, self.params)
@@ -257,7 +257,8 @@ class ImageProcessor:
         result = self.update(prior, observation,
                              image_rng(self.params.image.seed, frame.sequence),
                              jumps, self._jump_std,
-                             None if acquired else self.params.image.acquisition_num_particles)
+                             None if acquired else self.params.image.acquisition_num_particles,
+                             coarse_sweeps=acquired)
         if result is None:
             return ImageOutcome(None, None, None)
         # A degenerate particle set would claim certainty; floor the posterior variance
