@@ -160,6 +160,9 @@ class Tracker:
         if t >= self.last_applied_image_s:  # an out-of-order image does not pace the rest
             self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
         self.last_result = outcome.result
+        if outcome.observation is None and outcome.consistency is not None:
+            self.health = next_health(self.health, outcome.consistency, self.params.health)
+            return self._skip(frame, outcome.skip_reason, "images that show no arm")
         if outcome.observation is None:
             return self._skip(frame, "no valid depth pixel", "images without a valid pixel")
         self.health = next_health(self.health, outcome.consistency, self.params.health,

@@ -29,9 +29,12 @@ from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import (
     ImageConsistency,
     TrackerHealth,
+    agreeing_pixels,
     image_consistency,
+    is_consistent,
     is_misplaced,
     restart_due,
+    shows_no_arm,
 )
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.jump_visibility import jump_testable
@@ -119,6 +122,8 @@ class ImageOutcome:
     restarted: bool = False
     #: Whether the estimate put the arm out of view and the encoders in it (``is_misplaced``).
     misplaced: bool = False
+    #: Why the image was not applied (observation None), if not for lack of valid pixels.
+    skip_reason: str = ""
 
 
 class ImageProcessor:
@@ -225,6 +230,11 @@ class ImageProcessor:
                             frame.sequence, predicted.time_s, reason)
                 restarted, misplaced, acquired = True, False, False
                 prior, rendered, predicted = candidate, rendered_enc, encoders
+            elif shows_no_arm(predicted, encoders, health, self.params.health):
+                return ImageOutcome(None, None, predicted, skip_reason=(
+                    f"it sees through {predicted.see_through:.0%} of the arm where the "
+                    f"estimate puts it and {encoders.see_through:.0%} where the encoders do: "
+                    f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
         # Which pixels hide the robot is read at the prior mean: only meaningful while the
         # image does not contradict it. After a bias step, or from a wrong start, the true
         # arm in front of the prior's would be taken for an occluder, and the arm could then
@@ -293,17 +303,8 @@ class ImageProcessor:
         return ""
 
     def consistent(self, image: ImageConsistency) -> bool:
-        """Whether an image sees enough of the rendered arm and does not see through it
-        (the health's ``min_robot_pixels`` and ``max_see_through``)."""
-        health = self.params.health
-        return bool(image.visible_robot_pixels >= health.min_robot_pixels
-                    and image.see_through <= health.max_see_through)
-
-
-def agreeing_pixels(image: ImageConsistency) -> float:
-    """Robot pixels whose depth agrees with the rendered arm's."""
-    return image.agreement * image.robot_pixels
-
+        """``is_consistent`` under the tracker's health parameters."""
+        return is_consistent(image, self.params.health)
 
 
 def jump_window_s(image_time_s: float, last_applied_image_s: float,

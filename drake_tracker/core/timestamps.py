@@ -317,7 +317,8 @@ def log_reanchor(logger: logging.Logger, name: str, decision: StampDecision, raw
 
 def problem_kind(problem: str) -> str:
     """A short, stable name for a buffer's or image's problem (the rate limiter's key)."""
-    for words in ("not finite", "future", "older than", "gap", "no valid depth pixel"):
+    for words in ("not finite", "future", "older than", "gap", "no valid depth pixel",
+                  "no arm where one must be"):
         if words in problem:
             return f"images: {words}"
     return "images: other problems"

@@ -128,6 +128,9 @@ class CpfImageUpdateSystem(LeafSystem):
             outcome = self.processor.observe(frame, prior.anchor.prior, window, s.health)
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(frame, f"{type(err).__name__}: {err}")
+        if outcome.observation is None and outcome.consistency is not None:
+            s.health = next_health(s.health, outcome.consistency, self._health_params)
+            return self._skip(frame, outcome.skip_reason)
         if outcome.observation is None:
             return self._skip(frame, "no valid depth pixel")
         s.message = ImageObservationMessage(s.message.id + 1, frame.sequence,
