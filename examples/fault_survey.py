@@ -233,10 +233,17 @@ def run_tracker_case(bench, fn, keyword) -> tuple[str, str]:
 
 
 # ----------------------------------------------------------------- Diagram cases
+#: The Diagram cases are judged over [DIAGRAM_JUDGED_FROM_S, DIAGRAM_END_S] (s).
+DIAGRAM_JUDGED_FROM_S, DIAGRAM_END_S = 0.99, 1.19
+
+
 def diagram_outcome(bench, stamps=None, sequences=None, arrivals=None, readings=None,
                     images=None) -> tuple[np.ndarray, int]:
     """The Diagram (``AddTracker`` on a recorded-run source with these faults) run to
-    0.7 s: the hand's translation error then (mm) and the number of images applied."""
+    the end of the run (1.2 s; the faults are all before 0.6 s): the median of the hand's
+    translation error (mm) over its last 0.2 s, sampled every 10 ms, and the number of
+    images applied. (Judged at one sample 0.4 s after the fault, while the tracker was
+    still converging, a fault that delays convergence looked like lost data.)"""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
 
@@ -270,11 +277,14 @@ def diagram_outcome(bench, stamps=None, sequences=None, arrivals=None, readings=
                          source.GetOutputPort("depth_frame"), encoder_period_s=0.005)
     simulator = Simulator(builder.Build())
     context = simulator.get_mutable_context()
-    simulator.AdvanceTo(0.7)  # the fault cases are all before 0.6 s
-    X_CE = tracker.port("X_CE").Eval(tracker.kalman_bank.GetMyContextFromRoot(context))
-    truth = run.truth_X_CE[np.searchsorted(run.truth_times_s, 0.7 - 1e-9)]
+    errors = []
+    for t in np.arange(DIAGRAM_JUDGED_FROM_S, DIAGRAM_END_S + 1e-9, 0.01):
+        simulator.AdvanceTo(t)
+        X_CE = tracker.port("X_CE").Eval(tracker.kalman_bank.GetMyContextFromRoot(context))
+        truth = run.truth_X_CE[np.searchsorted(run.truth_times_s, t - 1e-9)]
+        errors.append(pose_errors(X_CE.GetAsMatrix4(), truth)[0][0])
     cpf = tracker.image_update.GetMyContextFromRoot(context).get_abstract_state(0)
-    return pose_errors(X_CE.GetAsMatrix4(), truth)[0][0], cpf.get_value().images_applied
+    return float(np.median(errors)), cpf.get_value().images_applied
 
 
 def diagram_cases(bench) -> list:
@@ -370,7 +380,7 @@ def main() -> int:
         if not np.isfinite(final):
             record(name, "NaN estimate", "")
         elif final > max(2.0 * clean, clean + 5.0):
-            record(name, "lost data", f"hand error {final:.1f} mm at 0.7 s, clean run "
+            record(name, "lost data", f"hand error {final:.1f} mm over the last 0.2 s, clean "
                    f"{clean:.1f} mm; {applied}/{clean_applied} images")
         elif applied < clean_applied:
             record(name, "warned skip" if warned else "silent skip",
