@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -65,10 +66,6 @@ def weighted_moments(samples: np.ndarray, weights: np.ndarray) -> tuple[np.ndarr
     return mean, variance
 
 
-def _log_normal(x: np.ndarray, mean: np.ndarray, var: np.ndarray) -> np.ndarray:
-    return -0.5 * (np.square(x - mean) / var + np.log(2.0 * np.pi * var))
-
-
 @dataclass(frozen=True)
 class CoordinateMixture:
     """Per coordinate: ``(1 - p) N(mean, std²) + p N(mean, std² + jump_std²)``, all (n,)."""
@@ -84,9 +81,22 @@ class CoordinateMixture:
         zero = np.zeros_like(np.asarray(mean, float))
         return CoordinateMixture(np.asarray(mean, float), np.asarray(std, float), zero, zero)
 
-    @property
+    @cached_property
     def has_jumps(self) -> bool:
         return bool(np.any((self.jump_probability > 0) & (self.jump_std > 0)))
+
+    @cached_property
+    def _log_density_terms(self) -> tuple[np.ndarray, ...]:
+        """Per coordinate, computed once (the mixture is immutable): whether it has spread,
+        its variance (1 where none), log(2 pi var), and the jump component's
+        log(1 - p), log(p) (-inf where p = 0), variance and log(2 pi var)."""
+        spread = self.std > 0
+        var = np.where(spread, self.std**2, 1.0)
+        jump_var = var + self.jump_std**2
+        with np.errstate(divide="ignore"):
+            log_p = np.log(self.jump_probability)
+        return (spread, var, np.log(2.0 * np.pi * var), np.log1p(-self.jump_probability),
+                log_p, jump_var, np.log(2.0 * np.pi * jump_var))
 
     def sample(self, block: np.ndarray, num: int, rng: np.random.Generator) -> np.ndarray:
         """(num, len(block)) draws of the block's coordinates."""
@@ -99,16 +109,16 @@ class CoordinateMixture:
 
     def log_density(self, x: np.ndarray, block: np.ndarray) -> np.ndarray:
         """(num,) log density of the block's values x (num, len(block)), summed over it;
-        coordinates without spread contribute 0."""
-        mean, std = self.mean[block], self.std[block]
-        spread = std > 0
-        var = np.where(spread, std**2, 1.0)
-        log_p = _log_normal(x, mean, var)
-        p_jump, jump_var = self.jump_probability[block], self.jump_std[block] ** 2
-        if np.any(p_jump > 0):
-            with np.errstate(divide="ignore"):
-                log_p = np.logaddexp(np.log1p(-p_jump) + log_p,
-                                     np.log(p_jump) + _log_normal(x, mean, var + jump_var))
+        coordinates without spread contribute 0 (the same numbers as
+        ``-0.5 ((x - mean)^2 / var + log(2 pi var))`` mixed with the jump component by
+        logaddexp, from constants computed once per mixture)."""
+        spread, var, log_norm, log_stay, log_jump, jump_var, jump_log_norm = (
+            t[block] for t in self._log_density_terms)
+        deviation2 = np.square(x - self.mean[block])
+        log_p = -0.5 * (deviation2 / var + log_norm)
+        if np.any(self.jump_probability[block] > 0):
+            log_p = np.logaddexp(log_stay + log_p,
+                                 log_jump + -0.5 * (deviation2 / jump_var + jump_log_norm))
         return np.sum(np.where(spread, log_p, 0.0), axis=1)
 
     def check(self, n: int, what: str) -> None:
