@@ -15,8 +15,9 @@ Keys of ``bench.json``:
 * ``image_updates_per_s_2000_1_thread`` / ``..._2_threads``: the bench robot's;
 * ``cad_over_bench_cost_per_evaluation``: fused evaluation cost, CAD robot / bench robot;
 * ``image_updates_per_s_default``: the bench robot with the default parameters;
-* ``image_updates_per_s_coarse_sweeps``: the same with ``COARSE_SWEEPS`` (the three
-  tempered sweeps on a 2x coarser image: faster, less robust; see the README);
+* ``image_updates_per_s_coarse_sweeps``: the same with ``image.sweep_image_widths_px``
+  set to ``COARSE_SWEEP_WIDTHS_PX`` (the three tempered sweeps on a 2x coarser image:
+  faster, less robust; see the README);
 * ``kf_step_us``: one predict+update of the whole bank (15 joints);
 * ``replay_us_per_reading``: re-filtering one buffered reading after a delayed image;
 * ``demo``: the demo's real-time factor (simulated seconds per wall-clock second) on the
@@ -45,8 +46,8 @@ from drake_tracker.core.pipeline import camera_chain_joints
 from drake_tracker.params import TrackerParams, resolve_blocks, resolve_kalman_params
 from drake_tracker.robot import build_tracker_model, robot_preset
 
-#: The coarse-sweep setting the bench times beside the defaults (``image`` parameters).
-COARSE_SWEEPS = {"sweep_image_widths_px": [40, 40, 40, 80]}
+#: The ``image.sweep_image_widths_px`` the bench times beside the defaults.
+COARSE_SWEEP_WIDTHS_PX = [40, 40, 40, 80]
 
 
 def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,
@@ -145,8 +146,7 @@ def run_benchmarks(quick: bool = False) -> dict:
     default = bench_image_update(apollo, camera, params, params.image.num_particles,
                                  repeats)
     coarse_params = TrackerParams()
-    for name, value in COARSE_SWEEPS.items():
-        setattr(coarse_params.image, name, value)
+    coarse_params.image.sweep_image_widths_px = list(COARSE_SWEEP_WIDTHS_PX)
     coarse = bench_image_update(apollo, camera, coarse_params, params.image.num_particles,
                                 repeats)
     kalman = bench_kalman(apollo, params)
