@@ -129,7 +129,14 @@ class Tracker:
         malformed image, or one not in metres (``core/depth_units.py``), raises
         ValueError.
         """
-        if self.images is None or frame.is_empty:
+        if frame.is_empty:
+            if np.size(frame.depth_m):
+                raise ValueError(f"image with sequence {frame.sequence}: a negative sequence "
+                                 "number marks the empty placeholder (DepthFrame.empty()), "
+                                 "not an image; number images from 0")
+            return self._skip(frame, "it is the empty placeholder (DepthFrame.empty()): "
+                              "no image yet", "empty placeholder frames")
+        if self.images is None:
             return False
         if np.asarray(frame.depth_m).dtype == np.uint16:  # a 16-bit camera's millimetres
             frame = replace(frame, depth_m=depth_to_metres(frame.depth_m, "16U_mm"))

@@ -192,7 +192,9 @@ def tracker_cases(bench) -> list:
               "sequence -1 (the empty placeholder)": dict(sequence=-1),
               "sequence restarts at 0": dict(sequence=0)}
     for label, f in frames.items():
-        add(f"image {label}", image_case, "stamp", **f)
+        add(f"image {label}", image_case, "sequence" if "-1" in label else "stamp", **f)
+    add("image the empty placeholder (DepthFrame.empty())", lambda b, tr: (
+        tr.add_image(DepthFrame.empty()), b.k0, 0.0))
     add("image twice (same stamp)", lambda b, tr: (image_case(b, tr)[0] and
                                                     image_case(b, tr)[0], b.k0, 0.0))
     cases.append(("image before any reading", lambda tr: (Tracker(

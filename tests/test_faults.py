@@ -62,6 +62,22 @@ def test_a_millimetre_or_negative_image_is_a_clear_error(apollo, run):
     assert tracker.add_image(DepthFrame(0.1, 0.15, metres, 3))
 
 
+def test_the_placeholder_is_a_warned_skip_and_a_negative_sequence_a_clear_error(
+        apollo, run, caplog):
+    """The survey's last silent skip: an image numbered -1 (the placeholder's number)
+    was ignored without a word. Now the placeholder itself is skipped with a warning,
+    and real pixels under its number are a clear error; neither changes the belief."""
+    tracker = started_tracker(apollo, run)
+    before = tracker.estimate().positions.copy()
+    with caplog.at_level(logging.WARNING):
+        assert not tracker.add_image(DepthFrame.empty())
+    assert "empty placeholder" in caplog.text
+    with pytest.raises(ValueError, match="sequence -1"):
+        tracker.add_image(DepthFrame(0.1, 0.15, run.depth_images_m[3], -1))
+    np.testing.assert_array_equal(tracker.estimate().positions, before)
+    assert tracker.add_image(DepthFrame(0.1, 0.15, run.depth_images_m[3], 0))
+
+
 @pytest.mark.parametrize("fault", ["all zero", "all NaN", "NaN stamp"])
 def test_images_without_a_valid_pixel_or_stamp_are_skipped_with_a_warning(
         apollo, run, caplog, fault):

@@ -231,6 +231,7 @@ def test_a_nan_burst_gives_one_warning_and_no_wide_prior(apollo, run, caplog):
     outside = [j for j in applied if run.image_capture_times_s[j] > 0.3]
     assert outside and all(applied[j] for j in outside)
     assert np.all(np.sqrt(tracker.estimate().position_variances) < 0.1)
+    assert "re-aligned" not in caplog.text  # a real gap says nothing about the clocks
 
 
 # ----------------------------------------------------------------- the same in the Diagram
@@ -412,3 +413,26 @@ def test_diagram_warns_of_frames_it_never_saw(apollo, run, caplog):
     with caplog.at_level(logging.WARNING):
         simulate(apollo, run, small_params(), run.reading_times_s, sequences)
     assert "3 frame(s) before image 9 were never on the depth port" in caplog.text
+
+
+def test_an_encoder_clock_step_forward_is_told_from_a_gap_by_the_images(apollo, run, caplog):
+    """Issue 14's last lost data: readings whose clock jumps 0.2 s ahead (within the
+    30 s glitch limit) leave a 0.2 s "gap" that the camera's next images fall into,
+    0.2 s behind their usual lag. They were skipped as in a gap of the readings for as
+    long as the step (1 s of images for a 1 s step); now N of them re-align the images
+    with the readings, offline and in the Diagram alike, and the rest are applied."""
+    stamps = run.reading_times_s + 0.2 * (run.reading_times_s >= 0.22)
+    p = small_params()
+    with caplog.at_level(logging.WARNING):
+        offline, applied = feed(Tracker(apollo, run.camera_intrinsics, p), run,
+                                stamps=stamps)
+    assert "re-aligned" in caplog.text and "in a gap of the readings at the same lag" \
+        in caplog.text and "re-anchored" not in caplog.text
+    after = [j for j in applied if run.image_capture_times_s[j] >= 0.22]
+    n = p.timestamps.reanchor_after_samples
+    assert len(after) > n + 1
+    assert not any(applied[j] for j in after[:n]) and all(applied[j] for j in after[n:])
+    assert all(applied[j] for j in applied if j not in after)
+    diagram, images_applied = simulate(apollo, run, p, stamps)
+    assert images_applied == sum(applied.values())
+    assert_same_when_settled(run, diagram, offline)

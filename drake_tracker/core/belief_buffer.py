@@ -261,6 +261,19 @@ class BeliefBuffer:
         ``max_interpolation_gap_s`` (e.g. a run of non-finite readings), where its prior
         would be the angle process's prediction, radians wide. None without readings
         (vision only) or when readings around ``t`` carry it (see ``image_anchor``)."""
+        gap = self.reading_gap(t)
+        if gap is None:
+            return None
+        t0, t1, _ = gap
+        return (f"stamped {t:.4f} s, it falls in a {t1 - t0:.3f} s gap of the joint readings "
+                f"({t0:.4f} s to {t1:.4f} s; max_interpolation_gap_s is "
+                f"{self.max_interpolation_gap_s:.3f} s)")
+
+    def reading_gap(self, t: float) -> tuple[float, float, bool] | None:
+        """The gap of the joint readings longer than ``max_interpolation_gap_s`` that
+        ``t`` falls in: its start and end (s; the end is the present while no reading has
+        closed it) and whether a later reading closed it; None when there is none (see
+        ``reading_gap_problem``)."""
         if self._last_reading_time == -np.inf or not np.isfinite(t):
             return None
         k = bisect.bisect_right(self._times, t)
@@ -271,9 +284,7 @@ class BeliefBuffer:
         t1 = self._times[after] if after is not None else self._now
         if t1 - t0 <= self.max_interpolation_gap_s:
             return None
-        return (f"stamped {t:.4f} s, it falls in a {t1 - t0:.3f} s gap of the joint readings "
-                f"({t0:.4f} s to {t1:.4f} s; max_interpolation_gap_s is "
-                f"{self.max_interpolation_gap_s:.3f} s)")
+        return t0, t1, after is not None
 
     def _reading_around(self, k: int, step: int) -> int | None:
         """Index of the nearest reading event from index ``k`` on, walking by ``step``."""

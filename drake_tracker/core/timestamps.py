@@ -131,6 +131,14 @@ class StreamClock:
         """Median of the latest accepted gaps (0 before two stamps)."""
         return float(np.median(self._gaps)) if self._gaps else 0.0
 
+    @property
+    def typical_lag_s(self) -> float | None:
+        """Median lag behind the reference of the latest accepted samples (s; see
+        :meth:`follow_reference`), or None before ``reanchor_after_samples`` of them."""
+        if len(self._lags) < self.params.reanchor_after_samples:
+            return None
+        return float(np.median(self._lags))
+
     def future_limit_s(self) -> float:
         """How far after the latest accepted stamp a stamp may be (s)."""
         p = self.params
@@ -174,14 +182,16 @@ class StreamClock:
         shifted back to its typical lag; returns that shift, else None. A clock step
         shared by the encoders and the camera needs it: the readings are re-anchored, and
         the images, still in order among themselves, would be refused for good; when
-        the shift is within half a period of the reference's own latest re-anchoring
-        (``reference_shift_s``), it is taken to be the same step and that shift is used."""
+        the shift is within half a period of ``reference_shift_s`` (the reference's own
+        latest re-anchoring, or the jump of its clock over a gap, see ``follow_buffer``),
+        it is taken to be the same step and that shift is used: the same in every shell,
+        whatever the phase at which the lags were measured."""
         lag = time_s - reference_s
         if not rejected:
             self._lags.append(lag)
             self._lag_run_count = 0
             return None
-        if len(self._lags) < self.params.reanchor_after_samples:
+        if self.typical_lag_s is None:
             return None  # no typical lag yet (e.g. the first images after the start)
         if self._lag_run_count and abs(lag - self._lag_run_first) <= 0.5 * self.recent_period_s:
             self._lag_run_count += 1
@@ -189,7 +199,7 @@ class StreamClock:
             self._lag_run_count, self._lag_run_first = 1, lag
         if self._lag_run_count < self.params.reanchor_after_samples:
             return None
-        shift = float(np.median(self._lags)) - lag
+        shift = self.typical_lag_s - lag
         if reference_shift_s and abs(shift - reference_shift_s) <= 0.5 * self.recent_period_s:
             shift = reference_shift_s
         self.offset_s += shift
@@ -327,14 +337,29 @@ def problem_kind(problem: str) -> str:
 def follow_buffer(clock: StreamClock, buffer, image_time_s: float, logger: logging.Logger,
                   readings_clock: StreamClock) -> None:
     """Runs an accepted image time through ``clock.follow_reference`` against the belief
-    buffer's present (images in a gap of the readings say nothing about the clocks)."""
+    buffer's present.
+
+    An image in a gap of the readings is evidence about the clocks only when the gap
+    looks like a step of the readings' clock: a later reading has closed the gap, and
+    the image lags the present by more than its typical lag plus half the gap (readings
+    that jumped 1 s ahead leave a 1 s "gap" which the camera's next images fall into,
+    1 s behind). An image in an open gap, or one that arrives at its usual lag (a real
+    encoder gap: the readings stopped, or were not finite), says nothing about them."""
     problem = buffer.image_time_problem(image_time_s)
-    if problem is None and buffer.reading_gap_problem(image_time_s) is not None:
-        return
-    shift = clock.follow_reference(image_time_s, buffer.now_s, problem is not None,
-                                   readings_clock.last_shift_s)
+    gap = buffer.reading_gap(image_time_s) if problem is None else None
+    step_s = readings_clock.last_shift_s
+    if gap is not None:
+        start_s, end_s, closed = gap
+        lag = image_time_s - buffer.now_s
+        if not (closed and clock.typical_lag_s is not None
+                and lag < clock.typical_lag_s - 0.5 * (end_s - start_s)):
+            return
+        problem = "in a gap of the readings that the readings' clock stepped over"
+        step_s = end_s - start_s - readings_clock.recent_period_s  # the readings' jump
+    shift = clock.follow_reference(image_time_s, buffer.now_s, problem is not None, step_s)
     if shift is not None:
+        reason = ("from the future" if "future" in problem else "in a gap of the readings"
+                  if "gap" in problem else "too old")
         logger.warning("image clock re-aligned with the joint readings: %d images in a row "
                        "were %s at the same lag; from now on their stamps are shifted by "
-                       "%+.4f s", clock.params.reanchor_after_samples,
-                       "from the future" if "future" in problem else "too old", shift)
+                       "%+.4f s", clock.params.reanchor_after_samples, reason, shift)
