@@ -13,7 +13,8 @@ import numpy as np
 from pydrake.common.yaml import yaml_dump
 
 from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.pipeline import PoseReadout, robot_joint_indices
+from drake_tracker.core.estimate import PoseReadout
+from drake_tracker.core.pipeline import robot_joint_indices
 from drake_tracker.core.renderer import default_view_configuration, make_renderer
 from drake_tracker.recording import RecordedRun
 

@@ -23,13 +23,11 @@ from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
 from drake_tracker.core.depth_units import check_depth_units
+from drake_tracker.core.estimate import PoseReadout, TrackerEstimate, estimate_from_belief
 from drake_tracker.core.frames import DepthFrame, depth_to_metres
 from drake_tracker.core.health import TrackerHealth, next_health
 from drake_tracker.core.pipeline import (
     ImageProcessor,
-    PoseReadout,
-    TrackerEstimate,
-    estimate_from_belief,
     full_reading,
     jump_window_s,
     make_bank_and_prior,

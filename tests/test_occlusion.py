@@ -5,14 +5,10 @@ import numpy as np
 import pytest
 
 from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.pipeline import (
-    ImageProcessor,
-    PoseReadout,
-    full_reading,
-    make_bank_and_prior,
-)
+from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
 from drake_tracker.core.renderer import default_view_configuration, make_renderer
 from drake_tracker.metrics import pose_errors
 from drake_tracker.params import TrackerParams

@@ -122,6 +122,13 @@ class HealthParams:
     #: suite's 57 runs (bias steps, occlusion and in-out-in included): the same figures.
     no_arm_see_through: float = 0.9
 
+    #: An acquired estimate whose unhidden arm agrees with fewer than this fraction of
+    #: its pixels in an image (``is_surprising``) gets a second opinion: the start-up
+    #: search from the encoders' arm, adopted (a restart) when it explains the image
+    #: better by ``second_opinion_margin_nats``. 0: never.
+    second_opinion_agreement: float = 0.5
+    second_opinion_margin_nats: float = 100.0
+
     def validate(self) -> None:
         """Raises ValueError naming the field."""
         checks = (
@@ -135,6 +142,10 @@ class HealthParams:
             ("misplaced_fraction", 0 <= self.misplaced_fraction < 1, "must be in [0, 1)"),
             ("no_arm_see_through", self.max_see_through <= self.no_arm_see_through <= 1,
              "must be in [max_see_through, 1] (1: never skip)"),
+            ("second_opinion_agreement", 0 <= self.second_opinion_agreement <= 1,
+             "must be in [0, 1] (0: never)"),
+            ("second_opinion_margin_nats", 0 <= self.second_opinion_margin_nats < 1e6,
+             "must be in [0, 1e6)"),
         )
         for name, ok, why in checks:
             if not ok:
@@ -182,6 +193,15 @@ def shows_no_arm(estimate: ImageConsistency, encoders: ImageConsistency,
     return bool(health.acquired and min(estimate.robot_pixels, encoders.robot_pixels)
                 >= params.min_robot_pixels and min(estimate.see_through, encoders.see_through)
                 > params.no_arm_see_through)
+
+
+def is_surprising(image: ImageConsistency, params: HealthParams) -> bool:
+    """Whether an image contradicts much of the arm where the estimate puts it: of the
+    robot pixels it does not show hidden (at least ``min_robot_pixels``), fewer than
+    ``second_opinion_agreement`` agree with the estimate's depth."""
+    visible = image.visible_robot_pixels
+    return visible >= params.min_robot_pixels and (
+        image.agreement * image.robot_pixels < params.second_opinion_agreement * visible)
 
 
 def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,

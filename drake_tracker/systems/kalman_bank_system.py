@@ -10,8 +10,9 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
+from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.pipeline import PoseReadout, full_reading, make_bank_and_prior
+from drake_tracker.core.pipeline import full_reading, make_bank_and_prior
 from drake_tracker.core.timestamps import ReadingGate
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
