@@ -11,7 +11,9 @@ import logging
 
 import numpy as np
 import pytest
+from fast_params import small_params
 from test_restart import CAMERA, hand_error_mm
+from test_timestamps import assert_same_when_settled, feed, simulate
 
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import HealthParams, ImageConsistency, TrackerHealth, is_surprising
@@ -20,6 +22,8 @@ from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_
 from drake_tracker.core.renderer import default_view_configuration, make_renderer
 from drake_tracker.params import TrackerParams
 from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.synthetic import synthetic_run
+from drake_tracker.tracker import Tracker
 
 FOLD_DEG = {"arm_joint_2": 8.0, "arm_joint_4": -12.0}
 ENCODER_BIAS_DEG = {"arm_joint_1": 3.0, "arm_joint_2": -3.0, "arm_joint_3": 3.0}
@@ -109,3 +113,23 @@ def test_an_unsurprising_image_gets_no_second_opinion(scene):
     np.testing.assert_array_equal(outcome.result.mean, alone.result.mean)
     np.testing.assert_array_equal(outcome.observation.information,
                                   alone.observation.information)
+
+
+def test_a_second_opinion_gives_the_same_estimates_offline_and_in_the_diagram(apollo, caplog):
+    """The second search draws from the image's stream after the first, and its restart
+    travels in the observation: the Diagram follows the offline tracker. Forced here:
+    every image with a disagreeing pixel is surprising, any gain is adopted, and the
+    update has 5 particles against the search's 150, the encoders 0.5 deg off."""
+    run = synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7,
+                        bias_rad=np.radians(0.5))
+    p = small_params()
+    p.health.second_opinion_agreement, p.health.second_opinion_margin_nats = 1.0, 0.0
+    p.image.num_particles = 5
+    offline_tracker = Tracker(apollo, run.camera_intrinsics, p)
+    with caplog.at_level(logging.WARNING):
+        offline, applied = feed(offline_tracker, run)
+    assert "search from the encoders' arm explains it better" in caplog.text
+    assert offline_tracker.health.restarts >= 1
+    diagram, images_applied = simulate(apollo, run, p)
+    assert images_applied == sum(applied.values())
+    assert_same_when_settled(run, diagram, offline)
