@@ -3,8 +3,8 @@
 After a bias step an image update can settle on a wrong fold of two joints that explains
 most of what it still renders (measured on s-full-arm/time-varying: -28 and +25 deg, 300
 mm off, 1300 nats below the truth, for good). An image that contradicts most of the
-estimate's unhidden arm (``is_surprising``) is also searched from the encoders' arm, and
-the better explanation of the image wins by a margin.
+estimate's unhidden arm, as did the image before (``is_surprising``), is also searched from
+the encoders' arm, and the better explanation of the image wins by a margin.
 """
 
 import logging
@@ -38,6 +38,12 @@ def test_an_image_is_surprising_when_its_unhidden_arm_mostly_disagrees():
     assert not is_surprising(ImageConsistency(0.0, 1000, 0.06, 0.0, occluded=0.9), params)
     # Too little unhidden arm to say anything.
     assert not is_surprising(ImageConsistency(0.0, 1000, 0.0, 0.5, occluded=0.98), params)
+    # With the image before: both must contradict (one is what a bias step looks like).
+    surprising, agreeing = ImageConsistency(0.0, 900, 0.4, 0.1), ImageConsistency(0.0, 900,
+                                                                                  0.9, 0.0)
+    assert is_surprising(surprising, params, previous=surprising)
+    assert not is_surprising(surprising, params, previous=agreeing)
+    assert not is_surprising(agreeing, params, previous=surprising)
     never = HealthParams(second_opinion_agreement=0.0)
     assert not is_surprising(ImageConsistency(0.0, 900, 0.0, 0.9), never)
 

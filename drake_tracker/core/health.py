@@ -123,7 +123,7 @@ class HealthParams:
     no_arm_see_through: float = 0.9
 
     #: An acquired estimate whose unhidden arm agrees with fewer than this fraction of
-    #: its pixels in an image (``is_surprising``) gets a second opinion: the start-up
+    #: its pixels in two images in a row (``is_surprising``) gets a second opinion: the start-up
     #: search from the encoders' arm, adopted (a restart) when it explains the image
     #: better by ``second_opinion_margin_nats``. 0: never.
     second_opinion_agreement: float = 0.5
@@ -195,13 +195,19 @@ def shows_no_arm(estimate: ImageConsistency, encoders: ImageConsistency,
                 > params.no_arm_see_through)
 
 
-def is_surprising(image: ImageConsistency, params: HealthParams) -> bool:
+def is_surprising(image: ImageConsistency, params: HealthParams,
+                  previous: ImageConsistency | None = None) -> bool:
     """Whether an image contradicts much of the arm where the estimate puts it: of the
     robot pixels it does not show hidden (at least ``min_robot_pixels``), fewer than
-    ``second_opinion_agreement`` agree with the estimate's depth."""
-    visible = image.visible_robot_pixels
-    return visible >= params.min_robot_pixels and (
-        image.agreement * image.robot_pixels < params.second_opinion_agreement * visible)
+    ``second_opinion_agreement`` agree with the estimate's depth. With ``previous`` (the
+    image before, against the estimate then), both must: one such image is what a bias
+    step looks like, and the bias-jump prior follows it in that image; a second one in a
+    row means the update did not."""
+    def contradicts(c: ImageConsistency) -> bool:
+        visible = c.visible_robot_pixels
+        return visible >= params.min_robot_pixels and (
+            c.agreement * c.robot_pixels < params.second_opinion_agreement * visible)
+    return contradicts(image) and (previous is None or contradicts(previous))
 
 
 def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,

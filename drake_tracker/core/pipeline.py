@@ -225,7 +225,7 @@ class ImageProcessor:
         if result is None:
             return ImageOutcome(None, None, None)
         if self.params.use_joint_readings and acquired and not restarted and is_surprising(
-                predicted, self.params.health):
+                predicted, self.params.health, health.latest):
             alternative = self._search_from_encoders(plain, candidate, rendered_enc,
                                                      encoders, result, rng, frame.sequence)
             if alternative is not None:
