@@ -87,15 +87,21 @@ def test_an_estimate_that_renders_under_half_the_encoders_arm_is_misplaced():
     assert not any(is_misplaced(e, none, params) for e in seen)
 
 
-@pytest.fixture(scope="module")
-def scene():
-    """Apollo in view and its depth image."""
+def apollo_in_view(noise_seed: int) -> tuple:
+    """Apollo at its default view configuration, and its depth image (2 mm of noise, the
+    background at 2.5 m) as frame 7 captured at 5 s."""
     model = build_tracker_model(robot_preset("apollo"))
     truth = default_view_configuration(model)
     rendered = make_renderer(model, CAMERA).render(truth[None])[0].astype(float)
-    noise = np.random.default_rng(5).normal(0, 0.002, rendered.shape)
+    noise = np.random.default_rng(noise_seed).normal(0, 0.002, rendered.shape)
     image = (np.where(np.isfinite(rendered), rendered, 2.5) + noise).astype(np.float32)
     return model, truth, DepthFrame(5.0, 5.05, image, 7)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """Apollo in view and its depth image."""
+    return apollo_in_view(noise_seed=5)
 
 
 def out_of_view_prior(model, truth, encoder_bias_rad: np.ndarray) -> np.ndarray:

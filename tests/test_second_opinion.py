@@ -12,16 +12,13 @@ import logging
 import numpy as np
 import pytest
 from fast_params import small_params
-from test_restart import CAMERA, hand_error_mm
+from test_restart import CAMERA, apollo_in_view, hand_error_mm
 from test_timestamps import assert_same_when_settled, feed, simulate
 
-from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import HealthParams, ImageConsistency, TrackerHealth, is_surprising
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A
 from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.core.renderer import default_view_configuration, make_renderer
 from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.synthetic import synthetic_run
 from drake_tracker.tracker import Tracker
 
@@ -51,16 +48,12 @@ def test_an_image_is_surprising_when_its_unhidden_arm_mostly_disagrees():
 @pytest.fixture(scope="module")
 def scene():
     """Apollo in view, its noisy depth image, and the encoders' reading (biased)."""
-    model = build_tracker_model(robot_preset("apollo"))
-    truth = default_view_configuration(model)
-    rendered = make_renderer(model, CAMERA).render(truth[None])[0].astype(float)
-    noise = np.random.default_rng(11).normal(0, 0.002, rendered.shape)
-    image = (np.where(np.isfinite(rendered), rendered, 2.5) + noise).astype(np.float32)
+    model, truth, frame = apollo_in_view(noise_seed=11)
     robot = [model.joint_names.index(n) for n in model.robot_joint_names]
     reading = truth[robot].copy()
     for name, deg in ENCODER_BIAS_DEG.items():
         reading[model.robot_joint_names.index(name)] += np.radians(deg)
-    return model, truth, reading, DepthFrame(5.0, 5.05, image, 7)
+    return model, truth, reading, frame
 
 
 def prior_at(model, reading, q_mean) -> np.ndarray:

@@ -38,7 +38,6 @@ class TrackerEstimate:
     health: TrackerHealth = TrackerHealth()
 
 
-
 class PoseReadout:
     """X_CE and X_WE of joint positions, from the model's batched kinematics."""
 

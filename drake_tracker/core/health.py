@@ -206,7 +206,7 @@ def is_surprising(image: ImageConsistency, params: HealthParams,
     def contradicts(c: ImageConsistency) -> bool:
         visible = c.visible_robot_pixels
         return visible >= params.min_robot_pixels and (
-            c.agreement * c.robot_pixels < params.second_opinion_agreement * visible)
+            agreeing_pixels(c) < params.second_opinion_agreement * visible)
     return contradicts(image) and (previous is None or contradicts(previous))
 
 

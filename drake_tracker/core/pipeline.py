@@ -224,7 +224,8 @@ class ImageProcessor:
                              coarse_sweeps=acquired)
         if result is None:
             return ImageOutcome(None, None, None)
-        if self.params.use_joint_readings and acquired and not restarted and is_surprising(
+        # (A restart above has cleared ``acquired``.)
+        if self.params.use_joint_readings and acquired and is_surprising(
                 predicted, self.params.health, health.latest):
             alternative = self._search_from_encoders(plain, candidate, rendered_enc,
                                                      encoders, result, rng, frame.sequence)
