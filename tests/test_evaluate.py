@@ -166,8 +166,8 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     task = Task("s-full-arm", "constant", 0, 1.5, 0.1, ("encoders_only", "full_fusion"))
     settle_s = 0.5
     summary = evaluate([task], tmp_path, settle_s=settle_s, progress=False)
-    for name in ("errors.csv", "summary.csv", "summary.txt", "boxplot_translation_mm.png",
-                 "boxplot_rotation_deg.png", "timeseries_s-full-arm_constant.png",
+    for name in ("errors.csv", "summary.csv", "summary.txt", "boxplot_s-full-arm.png",
+                 "paper_comparison.md", "timeseries_s-full-arm_constant.png",
                  f"runs/{task.name}.npz", f"results/{task.name}.csv",
                  f"results/{task.name}.json", "protocol.json", "failures.json"):
         assert (tmp_path / name).stat().st_size > 0, name

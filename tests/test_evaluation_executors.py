@@ -141,7 +141,7 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
     counts = re.search(r"(\d+) tasks, (\d+) already done", resumed.stdout)
     assert counts and int(counts[2]) == finished >= 1, resumed.stdout
     assert len(list((out / "results").glob("*.csv"))) == int(counts[1])
-    assert (out / "boxplot_translation_mm.png").exists()
+    assert (out / "boxplot_s-full-arm.png").exists()
 
 
 def test_the_ray_executor_without_ray_says_how_to_install_it(tmp_path, monkeypatch):

@@ -1,6 +1,7 @@
-"""The evaluation's figures: box plots of the settled errors (one box per method and
-case) and a time series of every sample per case (bias changes dotted, occlusion and
-out-of-view intervals shaded)."""
+"""The evaluation's figures: box plots of the settled errors, one figure per sequence
+(the paper's layout: the methods side by side, here for each bias variant), and a time
+series of every sample per case (bias changes dotted, occlusion and out-of-view
+intervals shaded)."""
 
 from __future__ import annotations
 
@@ -16,12 +17,15 @@ from drake_tracker.plots import mark_scenario_events, method_label
 #: One colour per method; the box plots draw their medians black over these.
 METHOD_COLORS = dict(zip(METHODS, ("0.6", "tab:blue", "tab:orange", "tab:green")))
 MEDIAN_LINE = {"color": "black", "linewidth": 1.6}
+#: The bias variants in the order the box plots show them (others follow, sorted).
+BIAS_ORDER = ("none", "constant", "time-varying", "ramp")
 
 
 def plot_results(rows: list[dict], out_dir: Path, settle_s: float = 0.0,
                  scenarios: dict | None = None) -> list[Path]:
-    """Box plots per metric (one box per method and sequence/bias) of the samples from
-    ``settle_s`` on, and time series of every sample. ``scenarios`` maps (sequence,
+    """Box plots per sequence (``boxplot_<sequence>.png``: translation and rotation, one
+    box per method and bias variant) of the samples from ``settle_s`` on, and time series
+    of every sample. ``scenarios`` maps (sequence,
     bias) to the Scenario of the plotted seed (default: the stored run's, or the
     preset's)."""
     import matplotlib
@@ -34,41 +38,53 @@ def plot_results(rows: list[dict], out_dir: Path, settle_s: float = 0.0,
     late = settled(rows, settle_s)
     cases = sorted({(r["sequence"], r["bias"]) for r in rows})
     methods = [m for m in METHODS if any(r["method"] == m for r in rows)]
-    box_metrics = (("translation_mm", "translation error (mm)"),
-                   ("rotation_deg", "rotation error (deg)")) if late else ()
-    for metric, unit in box_metrics:  # no box plots when no sample is settled
-        fig, ax = plt.subplots(figsize=(max(8, 1.2 * len(cases)), 4.5))
-        width = 0.8 / max(1, len(methods))
-        for i, method in enumerate(methods):
-            data = []
-            for case in cases:
-                v = np.array([float(r[metric]) for r in late
-                              if (r["sequence"], r["bias"]) == case and r["method"] == method])
-                data.append(v[np.isfinite(v)])
-            positions = np.arange(len(cases)) + (i - (len(methods) - 1) / 2) * width
-            bp = ax.boxplot(data, positions=positions, widths=width * 0.9, whis=(1, 99),
-                            showfliers=False, patch_artist=True, medianprops=MEDIAN_LINE)
-            for patch in bp["boxes"]:
-                patch.set_facecolor(METHOD_COLORS[method])
-            ax.plot([], [], color=METHOD_COLORS[method], lw=6, label=method)
-        ax.plot([], [], label="median", **MEDIAN_LINE)
-        ax.set_xticks(np.arange(len(cases)))
-        ax.set_xticklabels([f"{s}\n{b}" for s, b in cases], fontsize=7)
-        ax.set_yscale("log")
-        ax.set_ylabel(unit + ", whiskers p1-p99")
-        if settle_s > 0:
-            ax.set_title(f"errors from t = {settle_s:g} s on, all seeds", fontsize=9)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        path = out_dir / f"boxplot_{metric}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
+    if late:  # no box plots when no sample is settled
+        for seq in sorted({s for s, _ in cases}):
+            written.append(_plot_sequence_boxes(late, seq, methods, out_dir, plt, settle_s))
     for seq, bias in cases:
         scenario = (scenarios or {}).get((seq, bias))
         written.append(_plot_time_series(rows, seq, bias, methods, out_dir, plt, settle_s,
                                          scenario))
     return written
+
+
+def _plot_sequence_boxes(late: list[dict], seq: str, methods: list[str], out_dir: Path,
+                         plt, settle_s: float) -> Path:
+    """``boxplot_<sequence>.png``: per metric, the bias variants side by side, one box per
+    method (whiskers p1-p99 of all seeds' samples, log scale)."""
+    rows = [r for r in late if r["sequence"] == seq]
+    biases = sorted({r["bias"] for r in rows}, key=lambda b: (
+        BIAS_ORDER.index(b) if b in BIAS_ORDER else len(BIAS_ORDER), b))
+    seeds = len({r["seed"] for r in rows})
+    fig, axes = plt.subplots(1, 2, figsize=(max(7.0, 2.4 * len(biases) + 2.0), 3.8))
+    width = 0.8 / max(1, len(methods))
+    for ax, (metric, unit) in zip(axes, (("translation_mm", "translation error (mm)"),
+                                         ("rotation_deg", "rotation error (deg)"))):
+        for i, method in enumerate(methods):
+            data = []
+            for bias in biases:
+                v = np.array([float(r[metric]) for r in rows
+                              if r["bias"] == bias and r["method"] == method])
+                data.append(v[np.isfinite(v)])
+            positions = np.arange(len(biases)) + (i - (len(methods) - 1) / 2) * width
+            bp = ax.boxplot(data, positions=positions, widths=width * 0.9, whis=(1, 99),
+                            showfliers=False, patch_artist=True, medianprops=MEDIAN_LINE)
+            for patch in bp["boxes"]:
+                patch.set_facecolor(METHOD_COLORS[method])
+            ax.plot([], [], color=METHOD_COLORS[method], lw=6, label=method_label(method))
+        ax.set_xticks(np.arange(len(biases)))
+        ax.set_xticklabels(["no bias" if b == "none" else f"{b} bias" for b in biases],
+                           fontsize=8)
+        ax.set_yscale("log")
+        ax.set_ylabel(unit + ", whiskers p1-p99", fontsize=8)
+    axes[0].plot([], [], label="median", **MEDIAN_LINE)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{seq}: errors from t = {settle_s:g} s on, {seeds} seed(s)", fontsize=9)
+    fig.tight_layout()
+    path = out_dir / f"boxplot_{seq.replace('+', 'p')}.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
 
 
 def _stored_scenario(out_dir: Path, seq: str, bias: str, seed: int):

@@ -13,6 +13,7 @@ from contextlib import closing
 from pathlib import Path
 
 from drake_tracker.evaluation.executors import Executor, SerialExecutor, make_executor
+from drake_tracker.evaluation.paper_comparison import format_paper_comparison, paper_comparison
 from drake_tracker.evaluation.plots import plot_results
 from drake_tracker.evaluation.results import (
     ResultStore,
@@ -78,8 +79,8 @@ def run_tasks(executor: Executor, function: Callable, tasks: list[Task],
 def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
              settle_s: float = SETTLE_S, progress: bool = True) -> list[dict]:
     """Runs the tasks not done yet in ``out_dir`` and writes errors.csv, the summary
-    (summary.csv, summary.txt), failures.json and the figures there; returns the
-    summary rows."""
+    (summary.csv, summary.txt), paper_comparison.md, failures.json and the figures
+    there; returns the summary rows."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     check_same_protocol(tasks, out_dir)
@@ -106,6 +107,8 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
         print(f"no samples from --settle-s {settle_s:g} s on: the runs are shorter; the "
               f"summary is empty", flush=True)
     text = write_summary(summary, out_dir, failures)
+    (out_dir / "paper_comparison.md").write_text(
+        format_paper_comparison(paper_comparison(summary)) + "\n")
     if rows:
         first_seed = {}
         for t in tasks:
