@@ -2,8 +2,7 @@
 ``Tracker``, the parameter and scenario loaders, recordings and the Diagram, and sorts
 each outcome into one class:
 
-* ``clear error``: an exception of the documented kind (ValueError,
-  FileNotFoundError) whose message names the problem (a given keyword);
+* ``clear error``: a documented exception (ValueError, FileNotFoundError) naming the problem;
 * ``unclear error``: such an exception whose message does not name it;
 * ``warned skip``: the sample is not used, and a warning was logged;
 * ``handled``: the input is valid or made valid (e.g. a uint16 image, an out-of-order
