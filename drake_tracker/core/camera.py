@@ -4,8 +4,13 @@ image subsampling."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from pydrake.geometry import DepthRenderCamera, RenderCameraCore
+    from pydrake.systems.sensors import CameraInfo
 
 
 @dataclass(frozen=True)
@@ -41,12 +46,12 @@ class CameraIntrinsics:
         return CameraIntrinsics(width, height, f, f, width / 2.0 - 0.5, height / 2.0 - 0.5)
 
     @staticmethod
-    def from_camera_info(info) -> CameraIntrinsics:
+    def from_camera_info(info: CameraInfo) -> CameraIntrinsics:
         """From a ``pydrake.systems.sensors.CameraInfo``."""
         return CameraIntrinsics(info.width(), info.height(), info.focal_x(), info.focal_y(),
                                 info.center_x(), info.center_y())
 
-    def to_camera_info(self):
+    def to_camera_info(self) -> CameraInfo:
         """The same intrinsics as a ``pydrake.systems.sensors.CameraInfo``."""
         from pydrake.systems.sensors import CameraInfo
 
@@ -82,7 +87,8 @@ class CameraIntrinsics:
         return CameraIntrinsics(int(w), int(h), fx, fy, cx, cy)
 
 
-def as_intrinsics(camera) -> CameraIntrinsics:
+def as_intrinsics(camera: CameraIntrinsics | CameraInfo | DepthRenderCamera
+                  | RenderCameraCore) -> CameraIntrinsics:
     """CameraIntrinsics from Drake's ``CameraInfo``, a ``DepthRenderCamera`` or
     ``RenderCameraCore`` (e.g. ``sensor.default_depth_render_camera()``), or a
     CameraIntrinsics (returned as it is)."""

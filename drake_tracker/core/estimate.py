@@ -9,12 +9,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from drake_tracker.core.health import TrackerHealth
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
 from drake_tracker.core.kinematics import BatchedKinematics
+
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
 
 
 @dataclass
@@ -41,7 +45,7 @@ class TrackerEstimate:
 class PoseReadout:
     """X_CE and X_WE of joint positions, from the model's batched kinematics."""
 
-    def __init__(self, model):
+    def __init__(self, model: TrackerModel):
         self.model = model
         self.kinematics = BatchedKinematics.from_plant(model.plant)
 
@@ -54,7 +58,7 @@ class PoseReadout:
         return X_CE, X_WE, X_WC
 
 
-def estimate_from_belief(model, readout: PoseReadout, time_s: float,
+def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: float,
                          belief: np.ndarray) -> TrackerEstimate:
     X_CE, X_WE, _ = readout.poses(belief[MEAN_A])
     return TrackerEstimate(

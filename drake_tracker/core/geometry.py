@@ -10,8 +10,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from pydrake.geometry import SceneGraph, Shape
+    from pydrake.multibody.plant import MultibodyPlant
 
 #: Default number of segments around the axis of curved shapes.
 DEFAULT_SEGMENTS = 14
@@ -87,7 +93,7 @@ def _lathe(profile: list[tuple[float, float]], segments: int) -> tuple[np.ndarra
     return np.vstack(vertices), np.array(tris, dtype=np.int64)
 
 
-def box_mesh(size) -> tuple[np.ndarray, np.ndarray]:
+def box_mesh(size: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     sx, sy, sz = 0.5 * np.asarray(size, float)
     v = np.array([[x, y, z] for x in (-sx, sx) for y in (-sy, sy) for z in (-sz, sz)])
     # Vertex index = 4*ix + 2*iy + iz.
@@ -102,7 +108,8 @@ def box_mesh(size) -> tuple[np.ndarray, np.ndarray]:
     return v, np.array(tris, dtype=np.int64)
 
 
-def cylinder_mesh(radius: float, length: float, segments: int = DEFAULT_SEGMENTS):
+def cylinder_mesh(radius: float, length: float, segments: int = DEFAULT_SEGMENTS
+                  ) -> tuple[np.ndarray, np.ndarray]:
     r = _compensated(radius, segments)
     h = 0.5 * length
     return _lathe([(0.0, -h), (r, -h), (r, h), (0.0, h)], segments)
@@ -124,16 +131,19 @@ def _sphere_profile(radius: float, segments: int, lat: int, z_shift: float = 0.0
     return out
 
 
-def sphere_mesh(radius: float, segments: int = DEFAULT_SEGMENTS):
+def sphere_mesh(radius: float, segments: int = DEFAULT_SEGMENTS
+                ) -> tuple[np.ndarray, np.ndarray]:
     return _lathe(_sphere_profile(radius, segments, max(2, segments // 2)), segments)
 
 
-def ellipsoid_mesh(a: float, b: float, c: float, segments: int = DEFAULT_SEGMENTS):
+def ellipsoid_mesh(a: float, b: float, c: float, segments: int = DEFAULT_SEGMENTS
+                   ) -> tuple[np.ndarray, np.ndarray]:
     v, t = sphere_mesh(1.0, segments)
     return v * np.array([a, b, c]), t
 
 
-def capsule_mesh(radius: float, length: float, segments: int = DEFAULT_SEGMENTS):
+def capsule_mesh(radius: float, length: float, segments: int = DEFAULT_SEGMENTS
+                 ) -> tuple[np.ndarray, np.ndarray]:
     # Even latitude count so that the equator is a ring in both hemispheres.
     lat = 2 * max(1, -(-segments // 4))
     h = 0.5 * length
@@ -142,7 +152,8 @@ def capsule_mesh(radius: float, length: float, segments: int = DEFAULT_SEGMENTS)
     return _lathe(lower + upper, segments)
 
 
-def load_obj(path: str | Path, scale=(1.0, 1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+def load_obj(path: str | Path, scale: ArrayLike = (1.0, 1.0, 1.0)
+             ) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and triangles of a Wavefront OBJ file (``v`` and ``f`` lines only).
 
     Face entries may be ``a``, ``a/b``, ``a//c`` or ``a/b/c``, with negative indices
@@ -181,7 +192,8 @@ def _mesh_scale(shape) -> np.ndarray:
     return np.full(3, float(shape.scale()))
 
 
-def tessellate_shape(shape, segments: int = DEFAULT_SEGMENTS) -> tuple[np.ndarray, np.ndarray]:
+def tessellate_shape(shape: Shape, segments: int = DEFAULT_SEGMENTS
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """Triangles of a Drake Shape in its own geometry frame."""
     from pydrake.geometry import Box, Capsule, Convex, Cylinder, Ellipsoid, Mesh, Sphere
 
@@ -265,7 +277,8 @@ def orient_closed_mesh(vertices: np.ndarray, triangles: np.ndarray,
 # ----------------------------------------------------------------------------- extraction
 
 
-def extract_robot_meshes(plant, scene_graph, segments: int = DEFAULT_SEGMENTS) -> RobotMeshes:
+def extract_robot_meshes(plant: MultibodyPlant, scene_graph: SceneGraph,
+                         segments: int = DEFAULT_SEGMENTS) -> RobotMeshes:
     """All perception-role geometries of the plant (illustration role if there are none),
     tessellated and expressed in the frames of the bodies they are attached to."""
     from pydrake.geometry import Role

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +26,11 @@ from drake_tracker.core.likelihood import (
     prepare_observation,
 )
 from drake_tracker.core.renderer import make_renderer
+
+if TYPE_CHECKING:
+    from drake_tracker.core.render_batched import BatchedDepthRenderer
+    from drake_tracker.core.renderer import RenderThenScore
+    from drake_tracker.robot import TrackerModel
 
 #: How many per-update wall times ``StageTimes`` keeps.
 RECENT_UPDATES = 10_000
@@ -80,11 +86,11 @@ class CpfImageUpdate:
             pixels. The last sweep (beta = 1) must score the ``image_width_px`` image.
     """
 
-    def __init__(self, model, camera: CameraIntrinsics, blocks: list[np.ndarray],
+    def __init__(self, model: TrackerModel, camera: CameraIntrinsics, blocks: list[np.ndarray],
                  num_particles: int, likelihood: LikelihoodParams, image_width_px: int = 80,
                  max_kl: float = 2.0, renderer: str = "batched", near_m: float = 0.1,
                  far_m: float = 6.0, annealing_betas: tuple[float, ...] = (1.0,),
-                 sweep_image_widths_px: tuple[int, ...] = ()):
+                 sweep_image_widths_px: tuple[int, ...] = ()) -> None:
         likelihood.validate()
         if num_particles < 1:
             raise ValueError(f"num_particles must be >= 1, got {num_particles}")
@@ -128,7 +134,8 @@ class CpfImageUpdate:
         return prepare_observation(subsample(depth, self.stride), self.likelihood)
 
     def log_likelihood(self, q: np.ndarray, observation: PreparedObservation,
-                       renderer=None) -> np.ndarray:
+                       renderer: BatchedDepthRenderer | RenderThenScore | None = None
+                       ) -> np.ndarray:
         """(N,) log-likelihoods of configurations q (N, n) for one observation (prepared
         at the size ``renderer`` renders, by default ``self.renderer``)."""
         t0 = time.perf_counter()

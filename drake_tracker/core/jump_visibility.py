@@ -9,9 +9,15 @@ the likelihood is flat in that joint and a jump there is chosen by Monte-Carlo n
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from drake_tracker.core.likelihood import LikelihoodParams, pixel_sigma, valid_pixels
+
+if TYPE_CHECKING:
+    from drake_tracker.core.render_batched import BatchedDepthRenderer
+    from drake_tracker.core.renderer import RenderThenScore
 
 
 def changed_visible_pixels(base_m: np.ndarray, moved_m: np.ndarray, observed_m: np.ndarray,
@@ -35,7 +41,8 @@ def changed_visible_pixels(base_m: np.ndarray, moved_m: np.ndarray, observed_m: 
     return np.count_nonzero(differ & seen & valid[None], axis=(1, 2))
 
 
-def jump_testable(renderer, mean: np.ndarray, joints: np.ndarray, step: np.ndarray,
+def jump_testable(renderer: BatchedDepthRenderer | RenderThenScore, mean: np.ndarray,
+                  joints: np.ndarray, step: np.ndarray,
                   base_m: np.ndarray, observed_m: np.ndarray, params: LikelihoodParams,
                   min_pixels: int, occluders: bool = True) -> np.ndarray:
     """(len(joints),) whether the image shows at least ``min_pixels`` changed pixels (see

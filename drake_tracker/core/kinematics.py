@@ -9,12 +9,18 @@ runs in a numba kernel, in parallel over the N configurations.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit, prange
 from pydrake.multibody.tree import BodyIndex, JointIndex
 
 import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from pydrake.multibody.plant import MultibodyPlant
+    from pydrake.multibody.tree import Frame
 
 _REVOLUTE, _PRISMATIC, _WELD = 0, 1, 2
 _SUPPORTED = {"revolute": _REVOLUTE, "prismatic": _PRISMATIC, "weld": _WELD}
@@ -140,8 +146,11 @@ def _body_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev, out
 
 
 @njit(cache=True)
-def relative_poses_one(n, q, kind, inboard, outboard, q_index, axis, A, B, rev, frame_body,
-                       X_BF, X, Y, T, M):
+def relative_poses_one(n: int, q: np.ndarray, kind: np.ndarray, inboard: np.ndarray,
+                       outboard: np.ndarray, q_index: np.ndarray, axis: np.ndarray,
+                       A: np.ndarray, B: np.ndarray, rev: np.ndarray, frame_body: int,
+                       X_BF: np.ndarray, X: np.ndarray, Y: np.ndarray, T: np.ndarray,
+                       M: np.ndarray) -> None:
     """Y[b] = inv(X_W_body(frame_body) @ X_BF) @ X_WB[b] for particle n of q: the poses of
     all bodies in frame A (fixed at X_BF on body ``frame_body``). ``X`` (num_bodies, 4, 4)
     and ``T``, ``M`` (4, 4) are scratch; ``Y`` (num_bodies, 4, 4) the output."""
@@ -190,7 +199,8 @@ class BatchedKinematics:
     free bodies) raises a ValueError naming the joint.
     """
 
-    def __init__(self, plant, steps: list[_JointStep], num_positions: int, num_bodies: int):
+    def __init__(self, plant: MultibodyPlant, steps: list[_JointStep], num_positions: int,
+                 num_bodies: int):
         self._plant = plant
         self._steps = steps
         self._num_positions = num_positions
@@ -213,7 +223,7 @@ class BatchedKinematics:
                 self._A, self._B, self._rev)
 
     @staticmethod
-    def from_plant(plant) -> BatchedKinematics:
+    def from_plant(plant: MultibodyPlant) -> BatchedKinematics:
         if not plant.is_finalized():
             raise ValueError("BatchedKinematics.from_plant: the plant must be finalized")
         num_bodies = plant.num_bodies()
@@ -306,23 +316,23 @@ class BatchedKinematics:
             _body_poses_kernel(q, *self._tables(), X)
         return X
 
-    def frame_poses(self, q: np.ndarray, frame) -> np.ndarray:
+    def frame_poses(self, q: np.ndarray, frame: Frame) -> np.ndarray:
         """World pose X_WF of a plant Frame (body or fixed-offset frame), (N, 4, 4)."""
         X_WB = self.body_poses(q)[:, int(frame.body().index())]
         return X_WB @ _to4(frame.GetFixedPoseInBodyFrame())
 
-    def frame_tables(self, frame_A) -> tuple:
+    def frame_tables(self, frame_A: Frame) -> tuple:
         """The arguments of :func:`relative_poses_one` after ``q``, for frame A: the
         joint tables, A's body index and its fixed pose X_BF in that body."""
         X_BF = np.ascontiguousarray(_to4(frame_A.GetFixedPoseInBodyFrame()))
         return (*self._tables(), int(frame_A.body().index()), X_BF)
 
-    def checked_positions(self, q) -> np.ndarray:
+    def checked_positions(self, q: ArrayLike) -> np.ndarray:
         """q as a C-contiguous (N, nq) float array; a ValueError for a wrong shape or
         non-finite values."""
         return np.ascontiguousarray(self._check_q(q))
 
-    def relative_poses(self, q: np.ndarray, frame_A) -> np.ndarray:
+    def relative_poses(self, q: np.ndarray, frame_A: Frame) -> np.ndarray:
         """Poses X_AB of all bodies in frame A, (N, num_bodies, 4, 4)."""
         q = np.ascontiguousarray(self._check_q(q))
         out = np.empty((q.shape[0], self._num_bodies, 4, 4))

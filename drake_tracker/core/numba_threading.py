@@ -97,7 +97,7 @@ class SerialOrParallel:
             (1.0 - self.smoothing) * old + self.smoothing * cost)
 
 
-def serial_and_parallel(function: Callable, **options) -> tuple[Callable, Callable]:
+def serial_and_parallel(function: Callable, **options: object) -> tuple[Callable, Callable]:
     """``function`` compiled twice with ``cache=True``: serially, and with
     ``parallel=True`` (its ``prange`` loops over threads).
 

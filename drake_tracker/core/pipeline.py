@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -59,6 +60,9 @@ from drake_tracker.params import (
     validate_tracker_params,
 )
 
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
+
 log = logging.getLogger(__name__)
 
 #: A bias jump is looked for over at most this much time since the previous image (s).
@@ -94,7 +98,8 @@ class ImageProcessor:
     random numbers and skip the same images.
     """
 
-    def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams):
+    def __init__(self, model: TrackerModel, camera: CameraIntrinsics,
+                 params: TrackerParams) -> None:
         self.params = params
         im = params.image
         chain = camera_chain_joints(model)
@@ -318,7 +323,7 @@ def jump_window_s(image_time_s: float, last_applied_image_s: float,
     return image_time_s - last_applied_image_s if health.acquired else 0.0
 
 
-def make_bank_and_prior(model, params: TrackerParams, first_reading: np.ndarray | None
+def make_bank_and_prior(model: TrackerModel, params: TrackerParams, first_reading: np.ndarray | None
                         ) -> tuple[JointKalmanBank, np.ndarray]:
     """The Kalman bank for ``model`` and the initial (5, n) belief: angles at the first
     reading of the robot joints (or ``initial_positions_rad``), virtual joints at 0."""
@@ -341,7 +346,7 @@ def make_bank_and_prior(model, params: TrackerParams, first_reading: np.ndarray 
     return bank, prior
 
 
-def camera_chain_joints(model) -> list[str]:
+def camera_chain_joints(model: TrackerModel) -> list[str]:
     """The robot joints that move the camera (e.g. a pan-tilt head), base first."""
     plant = model.plant
     camera_body = model.nominal_camera_frame.body().index()
@@ -358,7 +363,7 @@ def image_time(frame: DepthFrame, params: TrackerParams) -> float:
     return float(frame.capture_time_s) - params.image.image_time_offset_s
 
 
-def new_belief_buffer(model, params: TrackerParams, t: float,
+def new_belief_buffer(model: TrackerModel, params: TrackerParams, t: float,
                       first_reading: np.ndarray | None) -> BeliefBuffer:
     """The delay buffer started at ``t`` from the first reading (None: vision only)."""
     bank, prior = make_bank_and_prior(model, params, first_reading)
@@ -366,12 +371,12 @@ def new_belief_buffer(model, params: TrackerParams, t: float,
                         params.max_interpolation_gap_s)
 
 
-def robot_joint_indices(model) -> np.ndarray:
+def robot_joint_indices(model: TrackerModel) -> np.ndarray:
     """Indices of the robot (measured) joints within ``model.joint_names``."""
     return np.array([model.joint_names.index(n) for n in model.robot_joint_names], int)
 
 
-def full_reading(model, robot_reading: np.ndarray) -> np.ndarray:
+def full_reading(model: TrackerModel, robot_reading: np.ndarray) -> np.ndarray:
     """The bank's reading vector: the robot joints' readings, 0 for the virtual joints."""
     q = np.zeros(model.num_joints)
     q[robot_joint_indices(model)] = robot_reading

@@ -179,10 +179,15 @@ def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, 
 
 
 @njit(cache=True)
-def render_particle(zbuf, X, vertices, triangles, part_body, part_vertex_start,
-                    part_tri_start, sphere_center, sphere_radius, tri_normal, tri_offset,
-                    tri_closed, planes, fx, fy, cx, cy, near, far, P, UV, poly, rows, span,
-                    keep):
+def render_particle(zbuf: np.ndarray, X: np.ndarray, vertices: np.ndarray,
+                    triangles: np.ndarray, part_body: np.ndarray,
+                    part_vertex_start: np.ndarray, part_tri_start: np.ndarray,
+                    sphere_center: np.ndarray, sphere_radius: np.ndarray,
+                    tri_normal: np.ndarray, tri_offset: np.ndarray, tri_closed: np.ndarray,
+                    planes: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                    near: float, far: float, P: np.ndarray, UV: np.ndarray,
+                    poly: np.ndarray, rows: np.ndarray, span: np.ndarray,
+                    keep: np.ndarray) -> None:
     """Renders one particle into ``zbuf`` (H, W) float64 of inverse depths 1/z, which
     must hold 0 (or anything farther) where nothing was drawn yet. ``X`` (num_bodies, 4,
     4) camera-frame body poses. Vertices and triangles are grouped by part
@@ -316,9 +321,13 @@ def render_particle(zbuf, X, vertices, triangles, part_body, part_vertex_start,
 
 
 @njit(parallel=True, cache=True)
-def render_kernel(X_CB, vertices, triangles, part_body, part_vertex_start, part_tri_start,
-                  sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed,
-                  planes, fx, fy, cx, cy, near, far, num_chunks, out):
+def render_kernel(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
+                  part_body: np.ndarray, part_vertex_start: np.ndarray,
+                  part_tri_start: np.ndarray, sphere_center: np.ndarray,
+                  sphere_radius: np.ndarray, tri_normal: np.ndarray, tri_offset: np.ndarray,
+                  tri_closed: np.ndarray, planes: np.ndarray, fx: float, fy: float,
+                  cx: float, cy: float, near: float, far: float, num_chunks: int,
+                  out: np.ndarray) -> None:
     """Renders particle n's body poses ``X_CB[n]`` into ``out[n]`` (N, H, W) float32."""
     N = X_CB.shape[0]
     V = vertices.shape[0]
@@ -356,7 +365,8 @@ def num_chunks(n: int) -> int:
     return max(1, min(n, 4 * numba.get_num_threads()))
 
 
-def frustum_planes(fx, fy, cx, cy, width, height, margin_px: float = 1.0) -> np.ndarray:
+def frustum_planes(fx: float, fy: float, cx: float, cy: float, width: int, height: int,
+                   margin_px: float = 1.0) -> np.ndarray:
     """Unit inward normals (4, 3) of the side planes (through the camera centre) of the
     region that projects within ``margin_px`` of the sampled pixel coordinates
     0..W-1, 0..H-1 (u = fx x/z + cx, v = fy y/z + cy)."""

@@ -20,6 +20,8 @@ and pixels with no hit, or whose nearest hit is beyond ``far_m``, are ``inf``.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from drake_tracker.core.camera import CameraIntrinsics
@@ -32,6 +34,9 @@ from drake_tracker.core.numba_threading import SerialOrParallel
 from drake_tracker.core.rasterize import frustum_planes, num_chunks, render_kernel
 from drake_tracker.core.render_likelihood import fused_scores
 
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
+
 #: The level of detail the renderer uses unless told otherwise.
 DEFAULT_DETAIL = LevelOfDetail()
 
@@ -43,10 +48,10 @@ class BatchedDepthRenderer:
     returns (N, H, W) float32 depths in metres, ``inf`` where nothing is rendered.
     """
 
-    def __init__(self, model, intrinsics: CameraIntrinsics, near_m: float = 0.1,
+    def __init__(self, model: TrackerModel, intrinsics: CameraIntrinsics, near_m: float = 0.1,
                  far_m: float = 6.0, segments: int = DEFAULT_SEGMENTS,
                  pixel_center_offset: float = 0.5,
-                 detail: LevelOfDetail | None = DEFAULT_DETAIL):
+                 detail: LevelOfDetail | None = DEFAULT_DETAIL) -> None:
         """``pixel_center_offset``: pixel (i, j) samples u = i + offset, v = j + offset.
         0.5 reproduces Drake's RenderEngineVtk images; 0.0 is the integer-centre reading.
         ``segments``: tessellation of curved shapes (see ``geometry``). ``detail``: the

@@ -20,7 +20,7 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.robot import add_robot, add_virtual_camera_joints
+from drake_tracker.robot import TrackerModel, add_robot, add_virtual_camera_joints
 
 RENDERER_NAME = "drake_tracker_depth_vtk"
 
@@ -33,8 +33,8 @@ class DrakeDepthRenderer:
     the same joints in the same position order.
     """
 
-    def __init__(self, model, intrinsics: CameraIntrinsics, near_m: float = 0.1,
-                 far_m: float = 6.0):
+    def __init__(self, model: TrackerModel, intrinsics: CameraIntrinsics, near_m: float = 0.1,
+                 far_m: float = 6.0) -> None:
         if not (0.0 < near_m < far_m):
             raise ValueError(f"need 0 < near_m < far_m, got near {near_m}, far {far_m}")
         self.model = model

@@ -64,9 +64,11 @@ _ERFC_TOP = _ERFC_HI - 1e-9
 
 
 @njit(cache=True, fastmath=SAFE_FASTMATH)
-def pixel_log_ratios(slots, depths, count, z, inv_sigma, lam_sigma2, gauss_coeff, occ_coeff,
-                     log_p_occ_inf, uniform, lam, occlusion, truncation, erfc_coeffs, terms,
-                     work):
+def pixel_log_ratios(slots: np.ndarray, depths: np.ndarray, count: int, z: np.ndarray,
+                     inv_sigma: np.ndarray, lam_sigma2: np.ndarray, gauss_coeff: np.ndarray,
+                     occ_coeff: np.ndarray, log_p_occ_inf: np.ndarray, uniform: float,
+                     lam: float, occlusion: float, truncation: float,
+                     erfc_coeffs: np.ndarray, terms: np.ndarray, work: np.ndarray) -> None:
     """terms[i] = log(p(z_p | d_i) / p_occ(z_p | inf)) for p = slots[i], d_i = depths[i],
     i < count: every term computed, no branches, in passes over the arrays that LLVM
     vectorises (exp and log from :mod:`~drake_tracker.core.vector_math`). ``work``:

@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from drake_tracker.core.camera import CameraIntrinsics
+
+if TYPE_CHECKING:
+    from drake_tracker.core.likelihood import LikelihoodParams, PreparedObservation
+    from drake_tracker.core.render_batched import BatchedDepthRenderer
+    from drake_tracker.core.render_drake import DrakeDepthRenderer
+    from drake_tracker.robot import TrackerModel
 
 #: Known backends: the numba batched rasteriser, and Drake's RenderEngineVtk (reference).
 BACKENDS = ("batched", "drake")
@@ -17,7 +25,7 @@ class RenderThenScore:
     ``score(q, observation)`` renders the (N, H, W) images, then scores them with the
     plain likelihood (:func:`~drake_tracker.core.likelihood.score_images`)."""
 
-    def __init__(self, renderer):
+    def __init__(self, renderer: DrakeDepthRenderer) -> None:
         self.renderer = renderer
         self.model = renderer.model
         self.intrinsics = renderer.intrinsics
@@ -28,15 +36,16 @@ class RenderThenScore:
         """(N, H, W) float32 depth images of configurations q (N, nq), inf = no hit."""
         return self.renderer.render(q)
 
-    def score(self, q: np.ndarray, observation) -> np.ndarray:
+    def score(self, q: np.ndarray, observation: PreparedObservation) -> np.ndarray:
         """(N,) log-likelihoods of configurations q (N, nq) against ``observation``."""
         from drake_tracker.core.likelihood import score_images
 
         return score_images(self.render(q), observation)
 
 
-def make_renderer(model, intrinsics: CameraIntrinsics, backend: str = "batched",
-                  near_m: float = 0.1, far_m: float = 6.0):
+def make_renderer(model: TrackerModel, intrinsics: CameraIntrinsics, backend: str = "batched",
+                  near_m: float = 0.1, far_m: float = 6.0
+                  ) -> BatchedDepthRenderer | RenderThenScore:
     """A renderer with ``render(q: (N, nq)) -> (N, H, W) float32`` (inf = no hit) and
     ``score(q, observation) -> (N,)`` log-likelihoods against a
     :class:`~drake_tracker.core.likelihood.PreparedObservation` of its image size."""
@@ -52,7 +61,7 @@ def make_renderer(model, intrinsics: CameraIntrinsics, backend: str = "batched",
     raise ValueError(f"unknown renderer backend '{backend}'; known: {list(BACKENDS)}")
 
 
-def random_configurations(model, num: int, seed: int, spread_rad: float = 0.3,
+def random_configurations(model: TrackerModel, num: int, seed: int, spread_rad: float = 0.3,
                           center: np.ndarray | None = None) -> np.ndarray:
     """``num`` configurations around ``center`` (default: all zeros), robot joints
     perturbed by N(0, spread_rad^2) and clipped to the joint limits, virtual camera joints
@@ -70,7 +79,7 @@ def random_configurations(model, num: int, seed: int, spread_rad: float = 0.3,
     return np.clip(q, plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits())
 
 
-def default_view_configuration(model) -> np.ndarray:
+def default_view_configuration(model: TrackerModel) -> np.ndarray:
     """A configuration that puts the arm in the camera's view for the shipped robots:
     Apollo's head turned to the arm (pan -0.35, tilt 0.6) with the arm reaching
     forward; other robots at zero."""
@@ -82,7 +91,8 @@ def default_view_configuration(model) -> np.ndarray:
     return q
 
 
-def synthetic_observation(renderer, q_true: np.ndarray, seed: int = 0,
+def synthetic_observation(renderer: BatchedDepthRenderer | RenderThenScore,
+                          q_true: np.ndarray, seed: int = 0,
                           background_m: float = 2.5, noise_m: float = 0.004) -> np.ndarray:
     """A depth image (H, W) float32 for benchmarks: the robot at ``q_true`` rendered by
     ``renderer`` in front of a wall at ``background_m``, plus Gaussian noise."""
@@ -92,7 +102,7 @@ def synthetic_observation(renderer, q_true: np.ndarray, seed: int = 0,
     return depth.astype(np.float32)
 
 
-def best_wall_and_cpu_time(fn, repeats: int) -> tuple[float, float]:
+def best_wall_and_cpu_time(fn: Callable[[], object], repeats: int) -> tuple[float, float]:
     """(wall, cpu) seconds of ``fn()``, each the least of ``repeats`` runs (the least
     disturbed by other processes on the machine); cpu is this process's CPU time summed
     over its threads."""
@@ -106,10 +116,11 @@ def best_wall_and_cpu_time(fn, repeats: int) -> tuple[float, float]:
     return float(wall), float(cpu)
 
 
-def benchmark_renderers(model, intrinsics: CameraIntrinsics, num_particles: int = 2000,
-                        seed: int = 0, num_drake: int | None = None,
+def benchmark_renderers(model: TrackerModel, intrinsics: CameraIntrinsics,
+                        num_particles: int = 2000, seed: int = 0, num_drake: int | None = None,
                         near_m: float = 0.1, far_m: float = 6.0, repeats: int = 3,
-                        tracking_spread_rad: float = 0.05, likelihood=None) -> dict:
+                        tracking_spread_rad: float = 0.05,
+                        likelihood: LikelihoodParams | None = None) -> dict:
     """Renders the same random configurations with both backends in this process.
 
     The batched backend renders all ``num_particles`` in one call (after a warm-up that

@@ -32,10 +32,14 @@ import copy
 import logging
 from collections import deque
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from drake_tracker.params import TimestampParams
+
+if TYPE_CHECKING:
+    from drake_tracker.core.belief_buffer import BeliefBuffer
 
 _log = logging.getLogger(__name__)
 
@@ -334,8 +338,8 @@ def problem_kind(problem: str) -> str:
     return "images: other problems"
 
 
-def follow_buffer(clock: StreamClock, buffer, image_time_s: float, logger: logging.Logger,
-                  readings_clock: StreamClock) -> None:
+def follow_buffer(clock: StreamClock, buffer: BeliefBuffer, image_time_s: float,
+                  logger: logging.Logger, readings_clock: StreamClock) -> None:
     """Runs an accepted image time through ``clock.follow_reference`` against the belief
     buffer's present.
 
