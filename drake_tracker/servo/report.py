@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from drake_tracker.servo.config import (
 )
 from drake_tracker.servo.outcomes import format_outcome_table, target_outcomes, true_errors
 from drake_tracker.servo.study import ServoRun, run_servo, servo_scenario
+
+if TYPE_CHECKING:
+    import argparse
 
 RUN_COLORS = {"encoders": "tab:blue", "tracker": "tab:green", "truth": "0.3"}
 
@@ -135,7 +139,8 @@ def run_servo_study(config: ServoStudyConfig, out: Path, params: TrackerParams |
     return report
 
 
-def run_servo_command(args, config: ServoStudyConfig, params: TrackerParams | None) -> int:
+def run_servo_command(args: argparse.Namespace, config: ServoStudyConfig,
+                      params: TrackerParams | None) -> int:
     """The ``drake-tracker servo`` command (its arguments already checked)."""
     start = time.perf_counter()
     out = Path(args.out)

@@ -28,6 +28,7 @@ from pydrake.multibody.tree import Frame
 from pydrake.systems.controllers import InverseDynamicsController
 from pydrake.systems.framework import (
     BasicVector,
+    Context,
     DiagramBuilder,
     InputPort,
     LeafSystem,
@@ -146,7 +147,7 @@ class ServoWorld:
         """Time between encoder samples (s)."""
         return 1.0 / self.scenario.encoders.rate_hz
 
-    def set_initial_state(self, root_context) -> None:
+    def set_initial_state(self, root_context: Context) -> None:
         """Puts the plant at rest at its home pose in the Diagram's ``root_context``."""
         plant_context = self.plant.GetMyMutableContextFromRoot(root_context)
         self.plant.SetPositions(plant_context, self.home_q)

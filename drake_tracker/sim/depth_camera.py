@@ -43,6 +43,7 @@ from pydrake.geometry import (
     ClippingRange,
     DepthRange,
     DepthRenderCamera,
+    FrameId,
     MakeRenderEngineVtk,
     RenderCameraCore,
     RenderEngineVtkParams,
@@ -281,7 +282,7 @@ class DepthCameraSystem(LeafSystem):
         output.set_value(context.get_abstract_state(self._latest).get_value())
 
 
-def AddDepthCamera(builder: DiagramBuilder, scene_graph: SceneGraph, parent_frame_id,
+def AddDepthCamera(builder: DiagramBuilder, scene_graph: SceneGraph, parent_frame_id: FrameId,
                    config: CameraConfig, seed: int = 0, name: str = "depth_camera",
                    encoder_period_s: float = 1e-3) -> tuple[RgbdSensor, DepthCameraSystem]:
     """Adds an RgbdSensor rigidly attached at the origin of the geometry frame

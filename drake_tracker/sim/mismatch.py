@@ -29,6 +29,7 @@ from pydrake.geometry import (
     Mesh,
     Role,
     SceneGraph,
+    Shape,
     Sphere,
 )
 from pydrake.math import RigidTransform, RotationMatrix
@@ -38,6 +39,7 @@ from pydrake.multibody.tree import (
     ModelInstanceIndex,
     PrismaticJoint,
     RevoluteJoint,
+    RigidBody,
 )
 
 from drake_tracker.sim.config import ModelMismatchConfig
@@ -99,7 +101,7 @@ def _inboard_joint(plant: MultibodyPlant, body):
     return None
 
 
-def cable_segments(plant: MultibodyPlant, end_effector_body) -> list:
+def cable_segments(plant: MultibodyPlant, end_effector_body: RigidBody) -> list:
     """(body, start, end) in the body's frame: from each moving link's joint to the next
     joint of the chain world -> end effector (segments shorter than 1 cm skipped)."""
     segments = []
@@ -135,7 +137,7 @@ def _cylinder_between(start: np.ndarray, end: np.ndarray, offset_m: float,
     return RigidTransform(RotationMatrix(rotation), 0.5 * (start + end) + offset_m * side)
 
 
-def scaled_shape(shape, scale: float):
+def scaled_shape(shape: Shape, scale: float) -> Shape:
     """``shape`` scaled by ``scale`` about its own frame's origin."""
     if isinstance(shape, Box):
         return Box(scale * shape.width(), scale * shape.depth(), scale * shape.height())

@@ -36,7 +36,7 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, ModelInstanceIndex
-from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.framework import DiagramBuilder, LeafSystem, OutputPort
 
 from drake_tracker.sim.config import CAMERA_FRAME_NAME, OccluderSpec
 from drake_tracker.sim.trajectories import smooth_window
@@ -46,7 +46,7 @@ from drake_tracker.sim.validation import require
 OCCLUDER_LABEL_BASE = 9000
 
 
-def occluder_shape(spec: OccluderSpec):
+def occluder_shape(spec: OccluderSpec) -> Box | Cylinder | Sphere:
     """The Drake shape of ``spec`` (box edges, cylinder radius and length, sphere radius)."""
     if spec.shape == "box":
         return Box(*spec.size_m)
@@ -176,7 +176,7 @@ def register_occluders(scene_graph: SceneGraph, specs: list[OccluderSpec]) -> tu
 
 
 def AddOccluders(builder: DiagramBuilder, scene_graph: SceneGraph, motion: OccluderMotion,
-                 positions_port, name: str = "occluders") -> OccluderPoses | None:
+                 positions_port: OutputPort, name: str = "occluders") -> OccluderPoses | None:
     """Registers ``motion``'s occluders with ``scene_graph`` and adds the system that poses
     them from ``positions_port`` (the world plant's positions); None without occluders."""
     if not motion.specs:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.yaml import yaml_dump, yaml_dump_typed
@@ -34,6 +35,9 @@ from drake_tracker.progress import SimulatedSecondsBar
 from drake_tracker.recording import RecordedRun
 from drake_tracker.sim.scenario import Scenario, load_scenario, validate_scenario
 from drake_tracker.sim.world import AddSimulatedWorld, SimulatedWorld
+
+if TYPE_CHECKING:
+    import argparse
 
 #: Signature of the hook that adds systems beside the world; it returns extra output
 #: ports to sample at the truth times (stored in ``RecordedRun.extra[name]``).
@@ -169,7 +173,7 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     return run
 
 
-def run_record(args) -> int:
+def run_record(args: argparse.Namespace) -> int:
     """``drake-tracker record --scenario NAME --out FILE [--duration S] [--image-stride N]``:
     simulates and writes the run as ``.npz`` (format in ``drake_tracker.recording``)."""
     scenario = load_scenario(args.scenario)

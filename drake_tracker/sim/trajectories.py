@@ -19,11 +19,15 @@ checks the joint limits on samples ``sample_rate_hz`` per second over the run.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from drake_tracker.sim.config import TrajectoryConfig
 from drake_tracker.sim.profiles import RobotProfile
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 def smooth_window(t: np.ndarray, start_s: float, duration_s: float, ramp_s: float) -> np.ndarray:
@@ -60,7 +64,7 @@ class JointTrajectory:
     excursion: float = 0.0
     excursion_window: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
-    def positions(self, t) -> np.ndarray:
+    def positions(self, t: ArrayLike) -> np.ndarray:
         t = np.atleast_1d(np.asarray(t, float))
         q = np.tile(self.home, (len(t), 1))
         if self.kind == "sinusoid":
@@ -76,7 +80,7 @@ class JointTrajectory:
                     t, *self.excursion_window)
         return q
 
-    def velocities(self, t, h: float = 1e-4) -> np.ndarray:
+    def velocities(self, t: ArrayLike, h: float = 1e-4) -> np.ndarray:
         """Central differences of ``positions`` (the functions are smooth)."""
         t = np.atleast_1d(np.asarray(t, float))
         return (self.positions(t + h) - self.positions(t - h)) / (2 * h)

@@ -29,7 +29,7 @@ import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import Frame
-from pydrake.systems.framework import Diagram, DiagramBuilder, OutputPort
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder, OutputPort
 from pydrake.systems.primitives import Demultiplexer
 from pydrake.systems.rendering import MultibodyPositionToGeometryPose
 
@@ -106,7 +106,7 @@ class SimulatedWorld:
     #: True when ``plant`` is a simulated (discrete) subsystem of the Diagram.
     dynamic: bool = False
 
-    def set_initial_state(self, root_context, time_s: float = 0.0) -> None:
+    def set_initial_state(self, root_context: Context, time_s: float = 0.0) -> None:
         """Dynamic mode: puts the plant on the reference (positions and velocities at
         ``time_s``) in the Diagram's ``root_context``; kinematic mode: nothing to do."""
         if self.dynamic:
@@ -243,8 +243,9 @@ def build_simulated_world(scenario: Scenario) -> tuple[Diagram, SimulatedWorld]:
     return diagram, world
 
 
-def add_truth_and_encoders(builder: DiagramBuilder, plant, positions, scenario: Scenario,
-                           robot_names: list[str], camera_frame, ee_frame, name: str
+def add_truth_and_encoders(builder: DiagramBuilder, plant: MultibodyPlant,
+                           positions: OutputPort, scenario: Scenario, robot_names: list[str],
+                           camera_frame: Frame, ee_frame: Frame, name: str
                            ) -> tuple[TruthSystem, BiasedEncoders]:
     """The ground truth of the plant's ``positions`` (joint angles, camera offset, hand in
     the camera) and the biased encoders that read the true angles."""

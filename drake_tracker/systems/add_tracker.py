@@ -18,6 +18,7 @@ A port of the package's own ``DepthFrame`` is connected as it is.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 
@@ -27,6 +28,13 @@ from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
 from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
 from drake_tracker.systems.depth_image_adapter import DepthImageToFrame, depth_port_kind
 from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
+
+if TYPE_CHECKING:
+    from pydrake.geometry import DepthRenderCamera, RenderCameraCore
+    from pydrake.systems.sensors import CameraInfo
+
+    from drake_tracker.core.camera import CameraIntrinsics
+    from drake_tracker.robot import TrackerModel
 
 #: Output ports of the Kalman bank that ``AddTracker`` exports.
 ESTIMATE_PORTS = ("estimated_position", "position_variance", "bias", "bias_variance",
@@ -56,7 +64,9 @@ class TrackerSystems:
         return self.kalman_bank.GetOutputPort(name)
 
 
-def AddTracker(builder: DiagramBuilder, model, camera, params: TrackerParams,
+def AddTracker(builder: DiagramBuilder, model: TrackerModel,
+               camera: CameraIntrinsics | CameraInfo | DepthRenderCamera | RenderCameraCore,
+               params: TrackerParams,
                measured_position: OutputPort, measurement_time: OutputPort,
                depth: OutputPort, encoder_period_s: float,
                image_check_period_s: float | None = None, name: str = "tracker",

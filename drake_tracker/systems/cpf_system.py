@@ -5,9 +5,10 @@ from __future__ import annotations
 import copy
 import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Context, LeafSystem
 
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
@@ -16,6 +17,9 @@ from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
 from drake_tracker.core.timestamps import RateLimitedWarning, problem_kind
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
+
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
 
 log = logging.getLogger(__name__)
 
@@ -61,7 +65,7 @@ class CpfImageUpdateSystem(LeafSystem):
     the buffer cannot place and failed updates are skipped with a rate-limited warning.
     """
 
-    def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams,
+    def __init__(self, model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
                  period_s: float, offset_s: float = 0.0):
         super().__init__()
         if not period_s > 0:
@@ -84,7 +88,7 @@ class CpfImageUpdateSystem(LeafSystem):
             state_ticket)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
 
-    def state(self, context) -> CpfState:
+    def state(self, context: Context) -> CpfState:
         """The system's state in ``context`` (counts, health, latest message)."""
         return context.get_abstract_state(self._state).get_value()
 

@@ -5,10 +5,11 @@ from __future__ import annotations
 import copy
 import logging
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Context, LeafSystem
 
 from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.frames import DepthFrame
@@ -27,6 +28,9 @@ from drake_tracker.core.timestamps import (
 )
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
+
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +97,8 @@ class DelayBufferSystem(LeafSystem):
     rate-limited warning; nothing else is dropped.
     """
 
-    def __init__(self, model, params: TrackerParams, period_s: float, offset_s: float = 0.0):
+    def __init__(self, model: TrackerModel, params: TrackerParams, period_s: float,
+                 offset_s: float = 0.0):
         super().__init__()
         if not period_s > 0:
             raise ValueError(f"DelayBufferSystem: period_s must be > 0, got {period_s}")
@@ -120,7 +125,7 @@ class DelayBufferSystem(LeafSystem):
             state_ticket | {self._frame_port.ticket()})
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
 
-    def state(self, context) -> DelayBufferState:
+    def state(self, context: Context) -> DelayBufferState:
         """The buffer, its clocks and the latest correction, in ``context``."""
         return context.get_abstract_state(self._state).get_value()
 

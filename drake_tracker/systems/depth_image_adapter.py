@@ -63,7 +63,7 @@ class ImageStamper(LeafSystem):
     ``image_time`` (1-vector, s) is NaN before the first sample.
     """
 
-    def __init__(self, period_s: float, model_image, offset_s: float = 0.0):
+    def __init__(self, period_s: float, model_image: object, offset_s: float = 0.0):
         super().__init__()
         if not period_s > 0:
             raise ValueError(f"ImageStamper: period_s must be > 0, got {period_s}")

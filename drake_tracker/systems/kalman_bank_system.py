@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
@@ -16,6 +17,9 @@ from drake_tracker.core.pipeline import full_reading, make_bank_and_prior
 from drake_tracker.core.timestamps import ReadingGate
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
+
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +73,8 @@ class JointKalmanBankSystem(LeafSystem):
     skips are skipped here too (the buffer logs them).
     """
 
-    def __init__(self, model, params: TrackerParams, period_s: float, offset_s: float = 0.0):
+    def __init__(self, model: TrackerModel, params: TrackerParams, period_s: float,
+                 offset_s: float = 0.0):
         super().__init__()
         if not period_s > 0:
             raise ValueError(f"JointKalmanBankSystem: period_s must be > 0, got {period_s}")
@@ -106,12 +111,12 @@ class JointKalmanBankSystem(LeafSystem):
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
 
     # ----------------------------------------------------------------- state access
-    def belief(self, context) -> np.ndarray:
+    def belief(self, context: Context) -> np.ndarray:
         """The (5, n) belief in ``context`` (the model's zero configuration before the
         first reading)."""
         return context.get_discrete_state(self._belief).get_value().reshape(5, self._n)
 
-    def bookkeeping(self, context) -> KalmanBankState:
+    def bookkeeping(self, context: Context) -> KalmanBankState:
         return context.get_abstract_state(self._bookkeeping).get_value()
 
     def _update(self, context, state):
