@@ -35,6 +35,7 @@ import json
 import platform
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -44,13 +45,16 @@ from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import VAR_A, JointKalmanBank, initial_moments
 from drake_tracker.core.pipeline import camera_chain_joints
 from drake_tracker.params import TrackerParams, resolve_blocks, resolve_kalman_params
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.robot import TrackerModel, build_tracker_model, robot_preset
+
+if TYPE_CHECKING:
+    import argparse
 
 #: The ``image.sweep_image_widths_px`` the bench times beside the defaults.
 COARSE_SWEEP_WIDTHS_PX = [40, 40, 40, 80]
 
 
-def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,
+def bench_image_update(model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
                        num_particles: int, repeats: int) -> dict:
     """Times whole CPF image updates with ``num_particles`` per block."""
     from drake_tracker.bench_likelihood import test_observation, time_updates, tracking_prior
@@ -64,7 +68,7 @@ def bench_image_update(model, camera: CameraIntrinsics, params: TrackerParams,
     return {"evaluations": update.evaluations_per_image, **timed}
 
 
-def bench_kalman(model, params: TrackerParams, repeats: int = 20000) -> dict:
+def bench_kalman(model: TrackerModel, params: TrackerParams, repeats: int = 20000) -> dict:
     bank = JointKalmanBank(resolve_kalman_params(params, model.joint_names))
     belief = initial_moments(np.zeros(model.num_joints), np.full(model.num_joints, 0.1),
                              np.full(model.num_joints, 0.1), np.ones(model.num_joints, bool))
@@ -241,7 +245,7 @@ def format_demo(demo: dict) -> str:
             f"{demo['real_time_factor_cpu']:.2f} per second of CPU time   (target >= 1.0)")
 
 
-def run_bench(args) -> int:
+def run_bench(args: argparse.Namespace) -> int:
     result = run_benchmarks(quick=getattr(args, "quick", False))
     print(format_bench(result))
     out = Path(args.out)

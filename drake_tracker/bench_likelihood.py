@@ -20,6 +20,7 @@ update (particles per block x blocks x annealing layers):
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -36,6 +37,10 @@ from drake_tracker.core.renderer import (
 )
 from drake_tracker.params import TrackerParams, resolve_blocks
 
+if TYPE_CHECKING:
+    from drake_tracker.core.likelihood import PreparedObservation
+    from drake_tracker.robot import TrackerModel
+
 
 def _test_image(renderer, q: np.ndarray) -> np.ndarray:
     """The robot at q in front of a wall at 2.5 m, 4 mm of noise (seeded)."""
@@ -45,7 +50,7 @@ def _test_image(renderer, q: np.ndarray) -> np.ndarray:
     return depth.astype(np.float32)
 
 
-def make_update(model, camera: CameraIntrinsics, params: TrackerParams,
+def make_update(model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
                 evaluations: int = 2000) -> CpfImageUpdate:
     """The tracker's image update with particles per block set for ``evaluations``."""
     blocks = resolve_blocks(params, model.joint_names, camera_chain_joints(model))
@@ -57,14 +62,14 @@ def make_update(model, camera: CameraIntrinsics, params: TrackerParams,
                           sweep_image_widths_px=tuple(params.image.sweep_image_widths_px))
 
 
-def test_observation(update: CpfImageUpdate):
+def test_observation(update: CpfImageUpdate) -> PreparedObservation:
     """The update's prepared observation of the robot at its view configuration in front
     of a wall (rendered by the update's own renderer)."""
     image = _test_image(update.renderer, default_view_configuration(update.model))
     return update.prepare(_full_resolution(image, update.stride))
 
 
-def tracking_prior(model) -> np.ndarray:
+def tracking_prior(model: TrackerModel) -> np.ndarray:
     """A prior at the view configuration: 1 deg per joint, 5 mm / rad per virtual joint."""
     std = np.full(model.num_joints, np.radians(1.0))
     std[model.virtual_joint_indices] = 0.005
@@ -72,7 +77,8 @@ def tracking_prior(model) -> np.ndarray:
                            np.ones(model.num_joints, bool))
 
 
-def time_updates(update: CpfImageUpdate, observation, prior, repeats: int) -> dict:
+def time_updates(update: CpfImageUpdate, observation: PreparedObservation,
+                 prior: np.ndarray, repeats: int) -> dict:
     """Best of ``repeats`` image updates: updates/s, and the time outside the kernel."""
     rng = np.random.default_rng(0)
     update(prior, observation, rng)  # warm-up (and compile)
@@ -93,8 +99,8 @@ def time_updates(update: CpfImageUpdate, observation, prior, repeats: int) -> di
             "kernel_ms": 1e3 * kernels[k]}
 
 
-def bench_robot(model, camera: CameraIntrinsics, params: TrackerParams, repeats: int = 5,
-                num_drake: int = 30, threads: tuple[int, ...] = (1, 2)) -> dict:
+def bench_robot(model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
+                repeats: int = 5, num_drake: int = 30, threads: tuple[int, ...] = (1, 2)) -> dict:
     """The figures of the module docstring for one robot (``camera``: full resolution)."""
     update = make_update(model, camera, params)
     renderer = update.renderer

@@ -13,6 +13,14 @@ import difflib
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from drake_tracker.params import TrackerParams
+    from drake_tracker.recording import RecordedRun
+    from drake_tracker.robot import TrackerModel
+    from drake_tracker.servo.config import ServoStudyConfig
+    from drake_tracker.sim.config import Scenario
 
 #: The bias variant a bare sequence name (``--scenario s-full-arm``) stands for.
 DEFAULT_BIAS_VARIANT = "constant"
@@ -72,7 +80,7 @@ def scenario_name(text: str) -> str:
                      "'drake-tracker scenarios' lists the presets")
 
 
-def resolve_scenario(text: str):
+def resolve_scenario(text: str) -> Scenario:
     """The :class:`~drake_tracker.sim.scenario.Scenario` of ``--scenario text``."""
     from drake_tracker.sim.scenario import load_scenario
 
@@ -85,7 +93,7 @@ def resolve_scenario(text: str):
         raise UsageError(f"scenario '{text}': {_one_line(err)}") from None
 
 
-def load_params_arg(path: str | None):
+def load_params_arg(path: str | None) -> TrackerParams:
     """The :class:`~drake_tracker.params.TrackerParams` of ``--params path`` (defaults
     when None); a missing or invalid file is a UsageError."""
     from drake_tracker.params import load_tracker_params
@@ -99,7 +107,7 @@ def load_params_arg(path: str | None):
         raise UsageError(f"parameter file '{path}': {_one_line(err)}") from None
 
 
-def check_params_for_model(params, model, where: str) -> None:
+def check_params_for_model(params: TrackerParams, model: TrackerModel, where: str) -> None:
     """Names in ``params`` (overrides, blocks) must be joints of ``model``."""
     from drake_tracker.params import resolve_blocks, resolve_kalman_params
 
@@ -110,7 +118,8 @@ def check_params_for_model(params, model, where: str) -> None:
         raise UsageError(f"{where}: {_one_line(err)}") from None
 
 
-def load_servo_config_arg(path: str | None, scenario: str | None = None):
+def load_servo_config_arg(path: str | None, scenario: str | None = None
+                          ) -> ServoStudyConfig:
     """The :class:`~drake_tracker.servo.config.ServoStudyConfig` of ``--config path``
     (default: the defaults), with ``--scenario`` over its ``scenario``; checked."""
     from drake_tracker.servo.config import load_servo_config, validate_servo_config
@@ -131,7 +140,7 @@ def load_servo_config_arg(path: str | None, scenario: str | None = None):
     return config
 
 
-def load_run_arg(path: str):
+def load_run_arg(path: str) -> RecordedRun:
     """The :class:`~drake_tracker.recording.RecordedRun` of ``--run path``."""
     import zipfile
 

@@ -49,6 +49,8 @@ from drake_tracker.robot import build_tracker_model
 from drake_tracker.sim.scenario import Scenario, load_scenario
 
 if TYPE_CHECKING:
+    import argparse
+
     from pydrake.geometry import Meshcat
 
 DEFAULT_SCENARIO = "s-full-arm/constant"
@@ -97,7 +99,7 @@ def plot_errors(run: RecordedRun, estimates: dict[str, np.ndarray], path: Path,
     return plot_error_time_series(run.truth_times_s[keep], errors, scenario, path, title)
 
 
-def demo_hook(meshcat, params: TrackerParams) -> Callable:
+def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
     """An ``add_systems`` hook: the tracker on the world's ports, and Meshcat views of the
     true world, the encoders-only robot and the estimate (each moved so that its camera is
     the real camera), the camera's frustum at its true and estimated poses, and the
@@ -248,8 +250,8 @@ def start_meshcat() -> Meshcat:
         logger.setLevel(level)
 
 
-def run_demo(args, scenario: Scenario | None = None, params: TrackerParams | None = None,
-             progress: bool = True) -> int:
+def run_demo(args: argparse.Namespace, scenario: Scenario | None = None,
+             params: TrackerParams | None = None, progress: bool = True) -> int:
     """The ``drake-tracker demo`` command (``--scenario``, ``--out``, ``--duration``,
     ``--params``); ``scenario`` and ``params``, when given, were already loaded from
     them (the command line checks them before anything is written)."""

@@ -15,6 +15,7 @@ import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,8 +27,16 @@ from drake_tracker.metrics import format_report_table, method_report
 from drake_tracker.params import TrackerParams, load_tracker_params
 from drake_tracker.progress import count_bar
 from drake_tracker.recording import RecordedRun
-from drake_tracker.robot import RobotConfig, build_tracker_model, load_robot_config
+from drake_tracker.robot import (
+    RobotConfig,
+    TrackerModel,
+    build_tracker_model,
+    load_robot_config,
+)
 from drake_tracker.tracker import Tracker
+
+if TYPE_CHECKING:
+    import argparse
 
 log = logging.getLogger(__name__)
 
@@ -55,11 +64,12 @@ def robot_config_from_yaml(text: str) -> RobotConfig:
     return load_robot_config(text)
 
 
-def model_for_run(run: RecordedRun):
+def model_for_run(run: RecordedRun) -> TrackerModel:
     return build_tracker_model(robot_config_from_yaml(run.robot_config_yaml))
 
 
-def replay_run(run: RecordedRun, params: TrackerParams | None = None, model=None,
+def replay_run(run: RecordedRun, params: TrackerParams | None = None,
+               model: TrackerModel | None = None,
                sample_times_s: np.ndarray | None = None,
                progress: bool = False) -> ReplayResult:
     """Replays ``run`` through a fresh :class:`Tracker` and samples its estimates;
@@ -130,7 +140,7 @@ def readings_at(run: RecordedRun, times_s: np.ndarray) -> np.ndarray:
     return out
 
 
-def encoders_only_X_CE(run: RecordedRun, model=None) -> np.ndarray:
+def encoders_only_X_CE(run: RecordedRun, model: TrackerModel | None = None) -> np.ndarray:
     """The baseline: forward kinematics of the latest raw reading at each truth time,
     with the nominal camera (virtual joints at 0). (T, 4, 4); NaN before any reading."""
     model = model if model is not None else model_for_run(run)
@@ -153,8 +163,8 @@ def run_report(run: RecordedRun, estimates: dict[str, np.ndarray]) -> dict:
     return report
 
 
-def run_track(args, run: RecordedRun | None = None, params: TrackerParams | None = None,
-              model=None) -> int:
+def run_track(args: argparse.Namespace, run: RecordedRun | None = None,
+              params: TrackerParams | None = None, model: TrackerModel | None = None) -> int:
     """``drake-tracker track --run FILE [--params YAML] [--out DIR]``; ``run``,
     ``params`` and ``model``, when given, were already loaded from those arguments."""
     run = run if run is not None else RecordedRun.load(args.run)

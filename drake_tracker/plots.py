@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
     from drake_tracker.sim.scenario import Scenario
 
 #: Method identifier -> the name a plot's legend shows.
@@ -51,7 +53,7 @@ def scenario_events(scenario: Scenario, t_end: float) -> dict[str, list]:
     return events
 
 
-def mark_scenario_events(ax, scenario: Scenario, t_end: float) -> None:
+def mark_scenario_events(ax: Axes, scenario: Scenario, t_end: float) -> None:
     """Dotted lines at the bias steps, grey spans while occluded or out of view, each
     labelled once for the legend."""
     events = scenario_events(scenario, t_end)

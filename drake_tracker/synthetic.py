@@ -9,6 +9,8 @@ Gaussian depth noise. Readings are the true angles plus a constant bias and nois
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from pydrake.common.yaml import yaml_dump
 
@@ -18,8 +20,11 @@ from drake_tracker.core.pipeline import robot_joint_indices
 from drake_tracker.core.renderer import default_view_configuration, make_renderer
 from drake_tracker.recording import RecordedRun
 
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
 
-def synthetic_run(model, duration_s: float = 1.0, encoder_rate_hz: float = 200.0,
+
+def synthetic_run(model: TrackerModel, duration_s: float = 1.0, encoder_rate_hz: float = 200.0,
                   image_rate_hz: float = 30.0, delay_s: float = 0.05,
                   camera: CameraIntrinsics | None = None, bias_rad: float = np.radians(3.0),
                   camera_offset: np.ndarray | None = None, amplitude_rad: float = 0.1,

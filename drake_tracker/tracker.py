@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -44,6 +45,9 @@ from drake_tracker.core.timestamps import (
 )
 from drake_tracker.params import TrackerParams, validate_tracker_params
 
+if TYPE_CHECKING:
+    from drake_tracker.robot import TrackerModel
+
 log = logging.getLogger(__name__)
 
 __all__ = ["Tracker", "TrackerEstimate"]
@@ -58,7 +62,8 @@ class Tracker:
         params: tracker parameters.
     """
 
-    def __init__(self, model, camera: CameraIntrinsics, params: TrackerParams | None = None):
+    def __init__(self, model: TrackerModel, camera: CameraIntrinsics,
+                 params: TrackerParams | None = None):
         self.model = model
         self.camera = camera
         self.params = params if params is not None else TrackerParams()

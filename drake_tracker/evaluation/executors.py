@@ -74,7 +74,8 @@ class Executor(ABC):
         return None
 
 
-def run_guarded(function: TaskFunction, task, report) -> tuple[bool, object]:
+def run_guarded(function: TaskFunction, task: object, report: Callable[[str], None]
+                ) -> tuple[bool, object]:
     """``(True, payload)`` or ``(False, traceback text)``: a task's own error never
     escapes as an exception, so every executor reports it the same way."""
     try:
@@ -88,7 +89,8 @@ class SerialExecutor(Executor):
 
     name = "serial"
 
-    def map_unordered(self, function, tasks, on_progress=None):
+    def map_unordered(self, function: TaskFunction, tasks: Sequence,
+                      on_progress: ProgressCallback | None = None) -> Iterator[Outcome]:
         for task in tasks:
             def report(message, _name=task.name):
                 if on_progress:
@@ -170,7 +172,8 @@ class ProcessExecutor(Executor):
     def describe(self) -> str:
         return f"local process pool, {self.workers} worker(s)"
 
-    def map_unordered(self, function, tasks, on_progress=None):
+    def map_unordered(self, function: TaskFunction, tasks: Sequence,
+                      on_progress: ProgressCallback | None = None) -> Iterator[Outcome]:
         if not tasks:
             return
         context = multiprocessing.get_context("spawn")

@@ -16,19 +16,26 @@ messages come back through a ``ray.util.queue.Queue``.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING
 
 from drake_tracker.evaluation.executors import (
     Executor,
     Outcome,
+    ProgressCallback,
+    TaskFunction,
     one_numba_thread,
     run_guarded,
 )
+
+if TYPE_CHECKING:
+    from types import ModuleType
 
 MISSING_RAY = ("the ray executor needs Ray: pip install 'drake_tracker[cluster]' "
                "(or pip install 'ray[default]')")
 
 
-def import_ray():
+def import_ray() -> ModuleType:
     """``ray``, or an ImportError with the one line that says how to install it."""
     try:
         import ray
@@ -92,7 +99,8 @@ class RayExecutor(Executor):
             self._ray.shutdown()  # stops a local instance's processes; leaves a cluster
             self._started_here = False
 
-    def map_unordered(self, function, tasks, on_progress=None):
+    def map_unordered(self, function: TaskFunction, tasks: Sequence,
+                      on_progress: ProgressCallback | None = None) -> Iterator[Outcome]:
         if not tasks:
             return
         if self._ray is None:

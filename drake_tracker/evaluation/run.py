@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from contextlib import closing
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from drake_tracker.evaluation.executors import Executor, SerialExecutor, make_executor
 from drake_tracker.evaluation.paper_comparison import format_paper_comparison, paper_comparison
@@ -23,6 +24,9 @@ from drake_tracker.evaluation.results import (
 from drake_tracker.evaluation.summary import summarize, write_summary
 from drake_tracker.evaluation.tasks import SETTLE_S, Task, TaskRunner, make_tasks
 from drake_tracker.methods import METHODS
+
+if TYPE_CHECKING:
+    import argparse
 
 #: How many times a task is tried before it is reported as failed.
 ATTEMPTS = 2
@@ -188,7 +192,7 @@ def _parse(args) -> list[Task]:
     return tasks
 
 
-def run_evaluate(args) -> int:
+def run_evaluate(args: argparse.Namespace) -> int:
     """``drake-tracker evaluate``: 0 when every task has a result, 1 when some failed,
     130 / 143 when stopped by Ctrl-C / SIGTERM (finished tasks are kept)."""
     tasks = _parse(args)

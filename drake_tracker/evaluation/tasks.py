@@ -18,11 +18,17 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from drake_tracker.methods import method_params
 from drake_tracker.metrics import pose_errors
+
+if TYPE_CHECKING:
+    from drake_tracker.params import TrackerParams
+    from drake_tracker.recording import RecordedRun
+    from drake_tracker.sim.config import Scenario
 
 #: The quick suite: each kind of sequence (sinusoid, free, fast, out of view, occlusion)
 #: with each bias variant, shortened.
@@ -77,7 +83,7 @@ class Task:
     def name(self) -> str:
         return task_name(self.sequence, self.bias, self.seed)
 
-    def scenario(self):
+    def scenario(self) -> Scenario:
         """The preset with this task's seed; a shortened run keeps its events in it (the
         hand leaves the view, the occluder passes) by compressing their timing."""
         from drake_tracker.sim.scenario import load_scenario
@@ -110,7 +116,7 @@ def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...],
             for seq, bias in cases for seed in range(num_seeds)]
 
 
-def task_base_params(task: Task):
+def task_base_params(task: Task) -> TrackerParams | None:
     """The TrackerParams a task's methods start from (None: the defaults)."""
     if not task.params_yaml:
         return None
@@ -128,8 +134,9 @@ def _sample_times(run, period_s: float) -> np.ndarray:
     return np.arange(start, run.truth_times_s[-1] + 1e-9, period_s)
 
 
-def evaluate_run(run, methods: Iterable[str], min_image_interval_s: float = 0.0,
-                 sample_period_s: float = SAMPLE_PERIOD_S, base_params=None,
+def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s: float = 0.0,
+                 sample_period_s: float = SAMPLE_PERIOD_S,
+                 base_params: TrackerParams | None = None,
                  tracker_seed: int = 0, report: Reporter | None = None,
                  wall_s: dict[str, float] | None = None) -> dict[str, dict[str, np.ndarray]]:
     """Errors of each method on one recorded run, at regular sample times.
