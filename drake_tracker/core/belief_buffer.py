@@ -56,6 +56,8 @@ class Restart:
     bias_var: np.ndarray
 
     def apply(self, prior: np.ndarray) -> np.ndarray:
+        """The restarted (5, n) belief: angle means ``a + b`` of ``prior``, bias means and
+        angle-bias covariances 0, variances ``angle_var`` and ``bias_var``."""
         restarted = np.zeros_like(prior)
         restarted[MEAN_A] = prior[MEAN_A] + prior[MEAN_B]
         restarted[VAR_A] = self.angle_var
@@ -106,6 +108,8 @@ class AngleObservation:
                                 self.restart)
 
     def apply(self, prior: np.ndarray) -> np.ndarray:
+        """The (5, n) posterior of ``prior`` (restarted first when ``restart`` is set): angle
+        marginals from the summed precision and information, the bias through eq. (16)."""
         if self.restart is not None:
             prior = self.restart.apply(prior)
         s_prior = prior[VAR_A]

@@ -46,6 +46,8 @@ def kl_from_uniform(log_weights: np.ndarray) -> float:
 
 
 def normalized_weights(log_weights: np.ndarray) -> np.ndarray:
+    """Weights ``exp(log_weights)`` scaled to sum to 1 (the largest log weight is
+    subtracted first, so nothing overflows)."""
     shifted = np.exp(log_weights - np.max(log_weights))
     return shifted / shifted.sum()
 
@@ -83,6 +85,8 @@ class CoordinateMixture:
 
     @cached_property
     def has_jumps(self) -> bool:
+        """Whether any coordinate has a jump component (``jump_probability > 0`` and
+        ``jump_std > 0``)."""
         return bool(np.any((self.jump_probability > 0) & (self.jump_std > 0)))
 
     @cached_property
@@ -122,6 +126,8 @@ class CoordinateMixture:
         return np.sum(np.where(spread, log_p, 0.0), axis=1)
 
     def check(self, n: int, what: str) -> None:
+        """Raises ValueError, prefixed with ``what``, unless all four arrays are finite with
+        shape (n,), ``std`` and ``jump_std`` >= 0 and ``jump_probability`` in [0, 1)."""
         for name in ("mean", "std", "jump_probability", "jump_std"):
             value = np.asarray(getattr(self, name), float)
             if value.shape != (n,) or not np.all(np.isfinite(value)):

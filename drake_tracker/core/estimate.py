@@ -60,6 +60,9 @@ class PoseReadout:
 
 def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: float,
                          belief: np.ndarray) -> TrackerEstimate:
+    """The :class:`TrackerEstimate` of a (5, n) ``belief`` at ``time_s``: its angle and bias
+    moments, the virtual joints' angle means as the camera offset, and the hand's poses
+    X_CE and X_WE (4, 4) at the mean angles."""
     X_CE, X_WE, _ = readout.poses(belief[MEAN_A])
     return TrackerEstimate(
         time_s=float(time_s),

@@ -44,6 +44,7 @@ class RobotMeshes:
 
     @property
     def num_triangles(self) -> int:
+        """T, the number of triangles."""
         return int(self.triangles.shape[0])
 
 
@@ -94,6 +95,8 @@ def _lathe(profile: list[tuple[float, float]], segments: int) -> tuple[np.ndarra
 
 
 def box_mesh(size: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """A box centred at the origin with edge lengths ``size`` (x, y, z; m): vertices (8, 3)
+    and triangles (12, 3) int64, wound counter-clockwise seen from outside."""
     sx, sy, sz = 0.5 * np.asarray(size, float)
     v = np.array([[x, y, z] for x in (-sx, sx) for y in (-sy, sy) for z in (-sz, sz)])
     # Vertex index = 4*ix + 2*iy + iz.
@@ -110,6 +113,9 @@ def box_mesh(size: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 
 def cylinder_mesh(radius: float, length: float, segments: int = DEFAULT_SEGMENTS
                   ) -> tuple[np.ndarray, np.ndarray]:
+    """A closed cylinder about z centred at the origin (z in ±length/2), ``segments`` around
+    the axis, radius compensated (module doc): vertices (V, 3) and triangles (T, 3) int64,
+    wound counter-clockwise seen from outside."""
     r = _compensated(radius, segments)
     h = 0.5 * length
     return _lathe([(0.0, -h), (r, -h), (r, h), (0.0, h)], segments)
@@ -133,17 +139,25 @@ def _sphere_profile(radius: float, segments: int, lat: int, z_shift: float = 0.0
 
 def sphere_mesh(radius: float, segments: int = DEFAULT_SEGMENTS
                 ) -> tuple[np.ndarray, np.ndarray]:
+    """A sphere centred at the origin, ``segments`` around z and ``segments // 2`` (at least
+    2) latitude bands, radius compensated: vertices (V, 3) and triangles (T, 3) int64,
+    wound counter-clockwise seen from outside."""
     return _lathe(_sphere_profile(radius, segments, max(2, segments // 2)), segments)
 
 
 def ellipsoid_mesh(a: float, b: float, c: float, segments: int = DEFAULT_SEGMENTS
                    ) -> tuple[np.ndarray, np.ndarray]:
+    """An ellipsoid with semi-axes ``a``, ``b``, ``c`` along x, y, z: the unit
+    :func:`sphere_mesh` scaled per axis; vertices (V, 3) and triangles (T, 3) int64."""
     v, t = sphere_mesh(1.0, segments)
     return v * np.array([a, b, c]), t
 
 
 def capsule_mesh(radius: float, length: float, segments: int = DEFAULT_SEGMENTS
                  ) -> tuple[np.ndarray, np.ndarray]:
+    """A capsule about z centred at the origin: a cylinder of ``radius`` whose ``length`` is
+    between the hemisphere centres (as Drake's Capsule), capped by two hemispheres;
+    vertices (V, 3) and triangles (T, 3) int64, wound counter-clockwise seen from outside."""
     # Even latitude count so that the equator is a ring in both hemispheres.
     lat = 2 * max(1, -(-segments // 4))
     h = 0.5 * length

@@ -126,6 +126,7 @@ class CpfImageUpdate:
 
     @property
     def evaluations_per_image(self) -> int:
+        """Likelihood evaluations per image update: particles x blocks x annealing sweeps."""
         return self.num_particles * len(self.blocks) * len(self.annealing_betas)
 
     def prepare(self, depth: np.ndarray) -> PreparedObservation:

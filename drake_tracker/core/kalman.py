@@ -66,6 +66,7 @@ class KalmanBankParams:
 
     @property
     def num_joints(self) -> int:
+        """n, the number of joints (the length of ``encoder_noise_std``)."""
         return len(self.encoder_noise_std)
 
     def effective_bias_std(self) -> np.ndarray:
@@ -137,9 +138,12 @@ class JointKalmanBank:
 
     @property
     def num_joints(self) -> int:
+        """n, the number of joints of ``params``."""
         return self.params.num_joints
 
     def check_reading(self, reading: np.ndarray) -> np.ndarray:
+        """``reading`` as a float (n,) array; a ValueError for a wrong shape, or naming the
+        joints whose value is not finite."""
         reading = np.asarray(reading, dtype=float)
         if reading.shape != (self.num_joints,):
             raise ValueError(

@@ -224,6 +224,9 @@ class BatchedKinematics:
 
     @staticmethod
     def from_plant(plant: MultibodyPlant) -> BatchedKinematics:
+        """The kinematics of a finalized ``plant``, its joints ordered breadth-first from the
+        world body. ValueError for a plant not finalized, an unsupported joint type, or a body
+        not connected to the world."""
         if not plant.is_finalized():
             raise ValueError("BatchedKinematics.from_plant: the plant must be finalized")
         num_bodies = plant.num_bodies()
@@ -289,10 +292,12 @@ class BatchedKinematics:
 
     @property
     def num_positions(self) -> int:
+        """nq, the plant's number of positions (the width of ``q``)."""
         return self._num_positions
 
     @property
     def num_bodies(self) -> int:
+        """The plant's number of bodies, the world body included."""
         return self._num_bodies
 
     def _check_q(self, q) -> np.ndarray:

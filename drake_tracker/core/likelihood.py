@@ -75,6 +75,8 @@ class LikelihoodParams:
 
 
 def pixel_sigma(z: np.ndarray, params: LikelihoodParams) -> np.ndarray:
+    """Per-pixel depth noise standard deviation (m) at depths ``z`` (m), same shape:
+    ``depth_noise_std_m + depth_noise_factor_per_m * z²``."""
     return params.depth_noise_std_m + params.depth_noise_factor_per_m * np.square(z)
 
 
@@ -111,6 +113,7 @@ class PreparedObservation:
 
     @property
     def num_valid(self) -> int:
+        """P, the number of valid pixels."""
         return len(self.z)
 
 

@@ -120,6 +120,7 @@ class ImageProcessor:
             tuple(im.annealing_betas), tuple(im.sweep_image_widths_px))
 
     def image_time(self, frame: DepthFrame) -> float:
+        """The time t' (s) ``frame`` is applied at: :func:`image_time` with these parameters."""
         return image_time(frame, self.params)
 
     def wants(self, frame: DepthFrame, next_due_s: float,

@@ -85,9 +85,11 @@ class BatchedDepthRenderer:
 
     @property
     def num_triangles(self) -> int:
+        """The number of triangles rendered (after the level of detail, if any)."""
         return self.meshes.num_triangles
 
     def render(self, q: np.ndarray) -> np.ndarray:
+        """(N, H, W) float32 depth images (m; inf: no hit) of q (N, nq) or (nq,)."""
         X_CB = self.kinematics.relative_poses(q, self.model.camera_frame)
         return self.render_camera_poses(X_CB)
 

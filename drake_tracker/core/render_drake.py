@@ -63,6 +63,9 @@ class DrakeDepthRenderer:
         self._camera = DepthRenderCamera(core, DepthRange(self.near_m, self.far_m))
 
     def render(self, q: np.ndarray) -> np.ndarray:
+        """(N, H, W) float32 depth images (m) of configurations q (N, nq) or (nq,), one
+        ``RenderDepthImage`` each; inf where nothing is hit within [near_m, far_m]. ValueError
+        for a wrong shape or a q that is not finite."""
         q = np.asarray(q, dtype=float)
         if q.ndim == 1:
             q = q[None, :]

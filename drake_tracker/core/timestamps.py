@@ -62,6 +62,8 @@ class RateLimitedWarning:
         return clone
 
     def warn(self, kind: str, message: str) -> None:
+        """Counts one warning of ``kind`` and logs ``message`` at the 1st, 10th, 100th, ... of
+        that kind (with the count so far after the first); only counts when not ``enabled``."""
         count = self.counts.get(kind, 0) + 1
         self.counts[kind] = count
         if self.enabled and _is_power_of_ten(count):
