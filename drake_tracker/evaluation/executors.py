@@ -91,6 +91,8 @@ class SerialExecutor(Executor):
 
     def map_unordered(self, function: TaskFunction, tasks: Sequence,
                       on_progress: ProgressCallback | None = None) -> Iterator[Outcome]:
+        """Runs the tasks one by one in this process, yielding each :class:`Outcome`;
+        ``report`` calls ``on_progress`` directly."""
         for task in tasks:
             def report(message, _name=task.name):
                 if on_progress:
@@ -170,10 +172,15 @@ class ProcessExecutor(Executor):
         self.workers = workers
 
     def describe(self) -> str:
+        """One line for the user: a local process pool and its number of workers."""
         return f"local process pool, {self.workers} worker(s)"
 
     def map_unordered(self, function: TaskFunction, tasks: Sequence,
                       on_progress: ProgressCallback | None = None) -> Iterator[Outcome]:
+        """Runs the tasks on up to ``workers`` spawned processes and yields each
+        :class:`Outcome` as it finishes (a worker that died gives its task an error). Progress
+        messages come through a queue, drained at least every 0.5 s; an exception or an early
+        stop ends the workers."""
         if not tasks:
             return
         context = multiprocessing.get_context("spawn")

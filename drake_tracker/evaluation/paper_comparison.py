@@ -21,6 +21,9 @@ BIASED = ("constant", "time-varying")
 
 @dataclass(frozen=True)
 class Comparison:
+    """One row of the comparison table: the paper's ``claim``, ``ours`` (our figures), the
+    ``verdict`` and the ``rule`` it follows from."""
+
     claim: str  # the paper's result, as SPEC §5 states it
     ours: str  # the figures read from the summary
     verdict: str  # matches / better / short of it / differs / not measured

@@ -74,6 +74,8 @@ class RayExecutor(Executor):
         import_ray()  # fail here, with the install line, before any work starts
 
     def describe(self) -> str:
+        """One line for the user: local instance or cluster address, and its CPU count ("?"
+        before the executor is entered)."""
         ray = self._ray
         cpus = int(ray.cluster_resources().get("CPU", 0)) if ray else "?"
         where = "a local Ray instance" if self.address is None else f"Ray at {self.address}"
@@ -95,12 +97,17 @@ class RayExecutor(Executor):
         return self
 
     def close(self) -> None:
+        """Shuts Ray down if this executor initialised it (a local instance stops, a cluster
+        keeps running); a Ray session the caller started is left alone."""
         if self._ray is not None and self._started_here:
             self._ray.shutdown()  # stops a local instance's processes; leaves a cluster
             self._started_here = False
 
     def map_unordered(self, function: TaskFunction, tasks: Sequence,
                       on_progress: ProgressCallback | None = None) -> Iterator[Outcome]:
+        """Runs each task as a one-CPU Ray task without retries (entering the executor first
+        if needed) and yields each :class:`Outcome` as it finishes; progress comes back through
+        a Ray queue. An exception or an early stop cancels the pending tasks."""
         if not tasks:
             return
         if self._ray is None:

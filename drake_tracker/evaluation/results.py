@@ -32,9 +32,11 @@ class ResultStore:
         self.results_dir = self.out_dir / "results"
 
     def result_path(self, name: str) -> Path:
+        """``results/<name>.csv``, whose existence marks task ``name`` done."""
         return self.results_dir / f"{name}.csv"
 
     def is_done(self, task: Task) -> bool:
+        """Whether ``task``'s result CSV exists (a resumed evaluation skips it)."""
         return self.result_path(task.name).exists()
 
     def write(self, payload: dict) -> None:

@@ -81,6 +81,7 @@ class Task:
 
     @property
     def name(self) -> str:
+        """The stem of this task's files in ``runs/`` and ``results/`` (:func:`task_name`)."""
         return task_name(self.sequence, self.bias, self.seed)
 
     def scenario(self) -> Scenario:
