@@ -69,6 +69,10 @@ def bench_image_update(model: TrackerModel, camera: CameraIntrinsics, params: Tr
 
 
 def bench_kalman(model: TrackerModel, params: TrackerParams, repeats: int = 20000) -> dict:
+    """Times the joint Kalman bank: ``kf_step_us``, one predict+update of all joints (µs,
+    mean over ``repeats``), and ``replay_us_per_reading``, re-filtering one buffered reading
+    after an image is inserted about 0.1 s back (µs); ``bank_variance_check`` is the largest
+    angle variance afterwards."""
     bank = JointKalmanBank(resolve_kalman_params(params, model.joint_names))
     belief = initial_moments(np.zeros(model.num_joints), np.full(model.num_joints, 0.1),
                              np.full(model.num_joints, 0.1), np.ones(model.num_joints, bool))
@@ -246,6 +250,8 @@ def format_demo(demo: dict) -> str:
 
 
 def run_bench(args: argparse.Namespace) -> int:
+    """``drake-tracker bench``: runs :func:`run_benchmarks` (fewer repetitions with
+    ``--quick``), prints the figures and writes them to ``OUT/bench.json``; returns 0."""
     result = run_benchmarks(quick=getattr(args, "quick", False))
     print(format_bench(result))
     out = Path(args.out)

@@ -65,6 +65,7 @@ def robot_config_from_yaml(text: str) -> RobotConfig:
 
 
 def model_for_run(run: RecordedRun) -> TrackerModel:
+    """The TrackerModel of the robot ``run`` was recorded with (its stored RobotConfig)."""
     return build_tracker_model(robot_config_from_yaml(run.robot_config_yaml))
 
 

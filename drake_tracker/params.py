@@ -228,6 +228,7 @@ def load_tracker_params(path: str | Path | None = None) -> TrackerParams:
 
 
 def tracker_params_to_yaml(params: TrackerParams) -> str:
+    """The YAML text of ``params`` (Drake's ``yaml_dump_typed``)."""
     from pydrake.common.yaml import yaml_dump_typed
 
     return yaml_dump_typed(params)
@@ -243,6 +244,7 @@ MAX_STD = 1e6
 
 
 def validate_joint_noise(noise: JointNoise, where: str) -> None:
+    """A ValueError naming ``<where>.<field>`` for the first field of ``noise`` out of range."""
     for name in ("encoder_noise_std_rad", "angle_process_std_rad_per_sqrt_s",
                  "initial_angle_std_rad"):
         value = getattr(noise, name)

@@ -27,6 +27,7 @@ class SimulatedSecondsBar:
             self._last_s = time_s
 
     def close(self) -> None:
+        """Closes the bar (also done on leaving a ``with`` block)."""
         self._bar.close()
 
     def __enter__(self) -> SimulatedSecondsBar:

@@ -94,9 +94,13 @@ class RecordedRun:
 
     @property
     def duration_s(self) -> float:
+        """The last ground-truth time (s); 0 for a run without ground truth."""
         return float(self.truth_times_s[-1]) if len(self.truth_times_s) else 0.0
 
     def save(self, path: str | Path) -> Path:
+        """Writes the run to ``path`` as a compressed ``.npz`` (the keys of the module doc;
+        ``extra`` is not stored), creating its folder; returns the path written, with ``.npz``
+        appended when missing."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(

@@ -189,6 +189,8 @@ class Tracker:
 
     @property
     def started(self) -> bool:
+        """Whether the tracker has a belief buffer, hence an estimate: after its first joint
+        reading, or from the start when it does not use joint readings."""
         return self.buffer is not None
 
     def estimate(self) -> TrackerEstimate:

@@ -250,6 +250,7 @@ class DepthCameraSystem(LeafSystem):
 
     @property
     def period_s(self) -> float:
+        """The nominal time between captures (s): 1 / ``rate_hz``."""
         return self._period
 
     def _capture_index(self, t: float) -> int | None:

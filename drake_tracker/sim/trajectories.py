@@ -65,6 +65,8 @@ class JointTrajectory:
     excursion_window: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def positions(self, t: ArrayLike) -> np.ndarray:
+        """Joint positions (T, n) at times ``t`` (s; a scalar or (T,)), in rad (m for prismatic
+        joints), by ``kind`` as the module doc describes."""
         t = np.atleast_1d(np.asarray(t, float))
         q = np.tile(self.home, (len(t), 1))
         if self.kind == "sinusoid":

@@ -117,6 +117,7 @@ class JointKalmanBankSystem(LeafSystem):
         return context.get_discrete_state(self._belief).get_value().reshape(5, self._n)
 
     def bookkeeping(self, context: Context) -> KalmanBankState:
+        """The :class:`KalmanBankState` (the abstract state) in ``context``."""
         return context.get_abstract_state(self._bookkeeping).get_value()
 
     def _update(self, context, state):
