@@ -7,9 +7,8 @@ not public. Each public item needs a docstring (``ast.get_docstring``).
 """
 
 import ast
-from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent.parent / "drake_tracker"
+from package_walk import PACKAGE, walk_package
 
 FunctionNode = ast.FunctionDef | ast.AsyncFunctionDef
 DefinitionNode = FunctionNode | ast.ClassDef
@@ -45,14 +44,9 @@ def offenders_in(source: str, label: str) -> list[str]:
 
 
 def test_every_module_and_public_definition_has_a_docstring():
-    files = sorted(PACKAGE.rglob("*.py"))
-    assert len(files) > 50, f"found only {len(files)} modules under {PACKAGE}"
-    checked = 0
-    offenders = []
-    for path in files:
-        source = path.read_text(encoding="utf-8")
-        checked += len(public_definitions(ast.parse(source)))
-        offenders += offenders_in(source, str(path.relative_to(PACKAGE.parent)))
+    modules, checked, offenders = walk_package(lambda tree: len(public_definitions(tree)),
+                                               offenders_in)
+    assert modules > 50, f"found only {modules} modules under {PACKAGE}"
     assert checked > 400, f"only {checked} public definitions found: is the walk broken?"
     assert not offenders, (f"{len(offenders)} modules or public definitions without a "
                            "docstring:\n" + "\n".join(offenders))

@@ -7,9 +7,9 @@ excepted, ``*args`` and ``**kwargs`` included) and, ``__init__`` excepted, its r
 """
 
 import ast
-from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent.parent / "drake_tracker"
+from package_walk import PACKAGE, walk_package
+
 DUNDERS_PUBLIC = {"__init__", "__call__"}
 
 FunctionNode = ast.FunctionDef | ast.AsyncFunctionDef
@@ -62,14 +62,9 @@ def offenders_in(source: str, label: str) -> list[str]:
 
 
 def test_every_public_function_has_type_hints():
-    files = sorted(PACKAGE.rglob("*.py"))
-    assert len(files) > 50, f"found only {len(files)} modules under {PACKAGE}"
-    checked = 0
-    offenders = []
-    for path in files:
-        source = path.read_text(encoding="utf-8")
-        checked += len(public_functions(ast.parse(source)))
-        offenders += offenders_in(source, str(path.relative_to(PACKAGE.parent)))
+    modules, checked, offenders = walk_package(lambda tree: len(public_functions(tree)),
+                                               offenders_in)
+    assert modules > 50, f"found only {modules} modules under {PACKAGE}"
     assert checked > 300, f"only {checked} public functions found: is the walk broken?"
     assert not offenders, (f"{len(offenders)} public functions without full type "
                            "hints:\n" + "\n".join(offenders))
