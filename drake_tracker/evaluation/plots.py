@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_tracker.evaluation.summary import settled
-from drake_tracker.evaluation.tasks import task_name
+from drake_tracker.evaluation.tasks import sequence_stem, task_name
 from drake_tracker.methods import METHODS
 from drake_tracker.plots import mark_scenario_events, method_label
 
@@ -81,7 +81,7 @@ def _plot_sequence_boxes(late: list[dict], seq: str, methods: list[str], out_dir
     axes[0].legend(fontsize=7)
     fig.suptitle(f"{seq}: errors from t = {settle_s:g} s on, {seeds} seed(s)", fontsize=9)
     fig.tight_layout()
-    path = out_dir / f"boxplot_{seq.replace('+', 'p')}.png"
+    path = out_dir / f"boxplot_{sequence_stem(seq)}.png"
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -125,7 +125,7 @@ def _plot_time_series(rows, seq, bias, methods, out_dir, plt, settle_s, scenario
     ax.set_title(f"{seq} / {bias} (seed {seed0})")
     ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
-    path = out_dir / f"timeseries_{seq.replace('+', 'p')}_{bias}.png"
+    path = out_dir / f"timeseries_{sequence_stem(seq)}_{bias}.png"
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path

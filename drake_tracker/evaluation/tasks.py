@@ -57,9 +57,14 @@ ERROR_COLUMNS = ("sequence", "bias", "method", "seed", "time_s", "translation_mm
 Reporter = Callable[[str], None]
 
 
+def sequence_stem(sequence: str) -> str:
+    """``sequence`` as it appears in file names ('+' spelt 'p': arm++ -> armpp)."""
+    return sequence.replace("+", "p")
+
+
 def task_name(sequence: str, bias: str, seed: int) -> str:
     """The stem of a task's files in ``runs/`` and ``results/``."""
-    return f"{sequence.replace('+', 'p')}__{bias}__seed{seed}"
+    return f"{sequence_stem(sequence)}__{bias}__seed{seed}"
 
 
 @dataclass(frozen=True)
