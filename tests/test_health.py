@@ -66,8 +66,13 @@ def test_acquired_while_a_recent_image_confirmed_the_estimate():
     for t, acquired in ((0.5, True), (1.0, True), (1.1, False), (3.0, False)):
         h = next_health(h, ImageConsistency(t, 0, 0.0, 0.0), p)
         assert (h.state, h.acquired) == (HealthState.UNCERTAIN, acquired), t
+        assert h.left_view  # the estimate's arm rendered out of view
     h = next_health(h, ImageConsistency(3.1, 100, 0.9, 0.02), p)
-    assert h.acquired and h.confirmed_s == 3.1
+    assert h.acquired and h.confirmed_s == 3.1 and not h.left_view
+    # Hidden behind something (rendered in view, 95 % nearer in the image): not left.
+    for t in (3.5, 4.0, 5.0):
+        h = next_health(h, ImageConsistency(t, 100, 0.05, 0.0, occluded=0.95), p)
+    assert not h.acquired and not h.left_view
     with pytest.raises(ValueError, match="reacquire_after_s"):
         HealthParams(reacquire_after_s=0.0).validate()
 

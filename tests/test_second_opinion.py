@@ -8,6 +8,7 @@ the encoders' arm, and the better explanation of the image wins by a margin.
 """
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,7 +16,13 @@ from fast_params import small_params
 from test_restart import CAMERA, apollo_in_view, hand_error_mm
 from test_timestamps import assert_same_when_settled, feed, simulate
 
-from drake_tracker.core.health import HealthParams, ImageConsistency, TrackerHealth, is_surprising
+from drake_tracker.core.health import (
+    HealthParams,
+    ImageConsistency,
+    TrackerHealth,
+    is_reacquiring,
+    is_surprising,
+)
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A
 from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
 from drake_tracker.params import TrackerParams
@@ -112,6 +119,49 @@ def test_an_unsurprising_image_gets_no_second_opinion(scene):
     np.testing.assert_array_equal(outcome.result.mean, alone.result.mean)
     np.testing.assert_array_equal(outcome.observation.information,
                                   alone.observation.information)
+
+
+def test_an_image_is_reacquiring_when_it_sees_an_arm_held_before_again():
+    params = HealthParams()  # min_robot_pixels 30
+    seen = ImageConsistency(5.0, 900, 0.9, 0.0)
+    lost_sight = TrackerHealth(acquired=False, confirmed_s=2.0, left_view=True)
+    assert is_reacquiring(lost_sight, seen, params)
+    # An arm that was only hidden behind something (never out of view) does not count.
+    assert not is_reacquiring(replace(lost_sight, left_view=False), seen, params)
+    # Held now, never held (the start), or held before a restart (confirmed_s reset).
+    assert not is_reacquiring(TrackerHealth(acquired=True, confirmed_s=4.9), seen, params)
+    assert not is_reacquiring(TrackerHealth(acquired=False, left_view=True), seen, params)
+    # Too little of the estimate's arm unhidden to say anything.
+    hidden = ImageConsistency(5.0, 900, 0.9, 0.0, occluded=0.97)
+    assert not is_reacquiring(lost_sight, hidden, params)
+    off = HealthParams(second_opinion_on_reacquisition=False)
+    assert not is_reacquiring(lost_sight, seen, off)
+
+
+@pytest.mark.parametrize("confirmed_s, enabled, searched", [
+    (3.0, True, True),      # the arm was held until 3 s and is seen again at 5 s
+    (-np.inf, True, False),  # never held: the start's search is the update itself
+    (3.0, False, False),     # second_opinion_on_reacquisition off
+])
+def test_the_images_that_see_the_arm_again_get_the_second_opinion(scene, confirmed_s,
+                                                                  enabled, searched):
+    """A belief carried over a gap can be far off while its image does not look
+    surprising (never, here: ``second_opinion_agreement`` 0); on re-acquisition the
+    search from the encoders' arm is asked anyway, and wins on the wrong fold."""
+    model, truth, reading, frame = scene
+    prior = prior_at(model, reading, folded(model, truth))
+    params = TrackerParams()
+    params.health.second_opinion_agreement = 0.0
+    params.health.second_opinion_on_reacquisition = enabled
+    health = TrackerHealth(acquired=False, confirmed_s=confirmed_s, left_view=True)
+    outcome = ImageProcessor(model, CAMERA, params).observe(frame, prior, 0.1, health)
+    assert outcome.restarted == searched
+    after = hand_error_mm(model, truth, outcome.observation.apply(prior)[MEAN_A])
+    encoders = hand_error_mm(model, truth, full_reading(model, reading))
+    if searched:
+        assert after < 0.5 * encoders
+    else:  # the update alone, from the fold
+        assert after > encoders
 
 
 def test_a_second_opinion_gives_the_same_estimates_offline_and_in_the_diagram(apollo, caplog):

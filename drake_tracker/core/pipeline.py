@@ -33,6 +33,7 @@ from drake_tracker.core.health import (
     image_consistency,
     is_consistent,
     is_misplaced,
+    is_reacquiring,
     is_surprising,
     restart_due,
     shows_no_arm,
@@ -230,9 +231,11 @@ class ImageProcessor:
                              coarse_sweeps=acquired)
         if result is None:
             return ImageOutcome(None, None, None)
-        # (A restart above has cleared ``acquired``.)
-        if self.params.use_joint_readings and acquired and is_surprising(
-                predicted, self.params.health, health.latest):
+        # (A restart above has cleared ``acquired``.) A second opinion from the encoders'
+        # arm on an image that contradicts the held arm, or that sees it again.
+        if self.params.use_joint_readings and not restarted and (
+                is_reacquiring(health, predicted, self.params.health) if not acquired
+                else is_surprising(predicted, self.params.health, health.latest)):
             alternative = self._search_from_encoders(plain, candidate, rendered_enc,
                                                      encoders, result, rng, frame.sequence)
             if alternative is not None:
