@@ -88,6 +88,34 @@ def test_coordinates_outside_blocks_keep_their_prior():
     assert r.mean[1] == mu[1] and r.variance[1] == sd[1] ** 2
 
 
+@pytest.mark.parametrize("betas", [(1.0,), (0.25, 1.0)])
+def test_a_likelihood_the_same_for_every_particle_leaves_the_prior_exactly(betas):
+    """Prior x constant is the prior: not its sample moments, whose Monte-Carlo noise,
+    image after image, would walk the estimate (an arm out of view scores 0 for every
+    particle). The rule needs every particle of every block and sweep to agree."""
+    mu, sd = np.array([0.15, 0.0, -0.3]), np.array([0.12, 0.2, 0.05])
+    blocks = [np.array([0]), np.array([1, 2])]
+    flat = annealed_coordinate_particle_filter(
+        mu, sd, blocks, 50, lambda q: np.full(len(q), -3.5), np.random.default_rng(4),
+        betas=betas, jump_probability=np.array([0.1, 0.0, 0.0]),
+        jump_std=np.array([0.3, 0.0, 0.0]))
+    assert flat.flat_likelihood
+    np.testing.assert_array_equal(flat.mean, mu)
+    np.testing.assert_array_equal(flat.variance, sd**2)
+    # One particle that differs anywhere, and the update is the ordinary one.
+    def almost(q):
+        out = np.zeros(len(q))
+        out[0] = 1e-9
+        return out
+    ordinary = annealed_coordinate_particle_filter(
+        mu, sd, blocks, 50, almost, np.random.default_rng(4), betas=betas)
+    assert not ordinary.flat_likelihood and not np.array_equal(ordinary.mean, mu)
+    # A single particle cannot tell: no rule.
+    single = coordinate_particle_filter(mu, sd, blocks, 1, lambda q: np.zeros(len(q)),
+                                        np.random.default_rng(4))
+    assert not single.flat_likelihood
+
+
 def test_kl_from_uniform():
     assert abs(kl_from_uniform(np.zeros(10))) < 1e-12
     lw = np.full(10, -np.inf)

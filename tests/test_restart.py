@@ -167,6 +167,24 @@ def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough
     assert np.all(post[MEAN_B] == 0.0)
 
 
+def test_an_image_that_scores_every_particle_the_same_leaves_the_belief(scene):
+    """The arm out of view for every particle (the shoulder 180 deg round, 0.2 deg of
+    spread) and an image of the background only: each particle scores 0, so the belief
+    stays as it was, not moved by the particles' Monte-Carlo noise."""
+    model, truth, frame = scene
+    prior = out_of_view_prior(model, truth, np.zeros(len(model.robot_joint_names)))
+    prior[MEAN_A, model.joint_names.index("arm_joint_1")] += np.radians(80.0)
+    prior[VAR_A] = np.radians(0.2) ** 2
+    background = replace(frame, depth_m=np.full_like(frame.depth_m, 2.5))
+    outcome = ImageProcessor(model, CAMERA, TrackerParams()).observe(
+        background, prior, 0.1, TrackerHealth(acquired=True))
+    assert outcome.consistency.robot_pixels == 0 and not outcome.restarted
+    assert outcome.result.flat_likelihood
+    assert not np.any(outcome.observation.precision)
+    assert not np.any(outcome.observation.information)
+    np.testing.assert_allclose(outcome.observation.apply(prior), prior, rtol=1e-12, atol=0)
+
+
 def test_a_restart_gives_the_same_estimates_offline_and_in_the_diagram(apollo):
     """The restart travels in the image's observation through the Diagram's delay buffer
     as through the offline tracker's. Forced here: every image whose estimate renders

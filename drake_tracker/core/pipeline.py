@@ -244,7 +244,11 @@ class ImageProcessor:
         # at the Monte-Carlo resolution of the prior.
         floor = np.maximum(prior[VAR_A] / self.update.num_particles, 1e-14)
         variance = np.maximum(result.variance, floor)
-        observation = AngleObservation.from_posterior(prior, result.mean, variance)
+        if result.flat_likelihood:  # the image says nothing: the belief stays as it is
+            zero = np.zeros_like(prior[MEAN_A])
+            observation = AngleObservation(zero, zero)
+        else:
+            observation = AngleObservation.from_posterior(prior, result.mean, variance)
         if restarted:
             observation = replace(observation, restart=self.restart)
         return ImageOutcome(observation, result, predicted, restarted, misplaced)
