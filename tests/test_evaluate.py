@@ -97,6 +97,44 @@ def _write_fake_results(out_dir, seeds=(0,), sequences=("s-full-arm", "occlusion
                                     (1 + seed) * rng.gamma(2, 5), rng.gamma(2)])
 
 
+def test_the_store_writes_compressed_reproducible_errors_and_reads_older_plain_ones(tmp_path):
+    """A payload's errors go to ``results/<task>.csv.gz`` (the same bytes for the same
+    errors: no time stamp in the gzip header); a folder of plain ``.csv`` results (an
+    older evaluation) is resumed and read the same; the compressed file wins over a plain
+    one of the same task."""
+    import gzip
+
+    from drake_tracker.evaluation import ResultStore
+
+    _write_fake_results(tmp_path, sequences=("s-full-arm",))  # a plain, older result
+    store = ResultStore(tmp_path)
+    older = Task("s-full-arm", "constant", 0, None, 0.1, METHODS)
+    newer = Task("occlusion", "constant", 0, None, 0.1, METHODS)
+    assert store.is_done(older) and not store.is_done(newer)
+    plain_rows = store.load_rows([older])
+    assert len(plain_rows) == len(METHODS) * 40
+    text = (tmp_path / "results" / f"{older.name}.csv").read_text()
+    store.write({"name": newer.name, "csv": text.replace("s-full-arm", "occlusion"),
+                 "simulated_s": 2.0})
+    first = store.result_path(newer.name).read_bytes()
+    store.write({"name": newer.name, "csv": text.replace("s-full-arm", "occlusion"),
+                 "simulated_s": 2.0})
+    assert store.result_path(newer.name).read_bytes() == first
+    assert store.result_path(newer.name).name == f"{newer.name}.csv.gz"
+    assert gzip.decompress(first).decode() == text.replace("s-full-arm", "occlusion")
+    assert store.is_done(newer) and len(store.load_metas([older, newer])) == 1
+    rows = store.load_rows()
+    assert [r["sequence"] for r in rows] == ["occlusion"] * len(plain_rows) + [
+        "s-full-arm"] * len(plain_rows)
+    assert rows[len(plain_rows):] == plain_rows
+    # Compressing an older folder's file in place changes nothing that is read.
+    plain = tmp_path / "results" / f"{older.name}.csv"
+    plain.with_name(plain.name + ".gz").write_bytes(gzip.compress(b"sequence,bias\n"))
+    assert store.load_rows([older]) == []
+    plain.with_name(plain.name + ".gz").write_bytes(gzip.compress(plain.read_bytes()))
+    assert store.load_rows([older]) == plain_rows
+
+
 def _fake_rows(tmp_path):
     _write_fake_results(tmp_path)
     return ResultStore(tmp_path).load_rows()
@@ -168,7 +206,7 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     summary = evaluate([task], tmp_path, settle_s=settle_s, progress=False)
     for name in ("errors.csv", "summary.csv", "summary.txt", "boxplot_s-full-arm.png",
                  "paper_comparison.md", "timeseries_s-full-arm_constant.png",
-                 f"runs/{task.name}.npz", f"results/{task.name}.csv",
+                 f"runs/{task.name}.npz", f"results/{task.name}.csv.gz",
                  f"results/{task.name}.json", "protocol.json", "failures.json"):
         assert (tmp_path / name).stat().st_size > 0, name
     with (tmp_path / "errors.csv").open() as f:

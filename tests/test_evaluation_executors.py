@@ -80,14 +80,14 @@ def test_ray_and_the_process_pool_give_identical_results_and_resume_each_other(t
     (mixed / "results").mkdir(parents=True)
     shutil.copy(local / "protocol.json", mixed)
     first, second = _TASKS[0].name, _TASKS[1].name
-    for suffix in (".csv", ".json"):
+    for suffix in (".csv.gz", ".json"):
         shutil.copy(local / "results" / f"{first}{suffix}", mixed / "results")
     with RayExecutor(num_cpus=2, shares_files=False) as executor:
         evaluate(_TASKS, mixed, executor, settle_s=0.5, progress=False)
     assert not ray.is_initialized()  # the executor stopped the instance it started
     assert not (mixed / "runs").exists()  # nothing was written by the worker
-    assert ((mixed / "results" / f"{second}.csv").read_text()
-            == (local / "results" / f"{second}.csv").read_text())
+    assert ((mixed / "results" / f"{second}.csv.gz").read_bytes()
+            == (local / "results" / f"{second}.csv.gz").read_bytes())
     assert (mixed / "summary.csv").read_text() == (local / "summary.csv").read_text()
     for folder in (local, mixed):
         meta = json.loads((folder / "results" / f"{second}.json").read_text())
@@ -119,7 +119,7 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
                                stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 240
-        while not list((out / "results").glob("*.csv")) and process.poll() is None:
+        while not list((out / "results").glob("*.csv.gz")) and process.poll() is None:
             assert time.monotonic() < deadline, "no task finished in time"
             time.sleep(0.2)
         process.send_signal(signal.SIGTERM)
@@ -127,7 +127,7 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
     finally:
         if process.poll() is None:
             process.kill()
-    finished = len(list((out / "results").glob("*.csv")))
+    finished = len(list((out / "results").glob("*.csv.gz")))
     if process.returncode != 0:  # stopped while tasks were running
         assert process.returncode == 143, output
         assert "the same command resumes" in output
@@ -140,7 +140,7 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
     assert resumed.returncode == 0, resumed.stdout + resumed.stderr
     counts = re.search(r"(\d+) tasks, (\d+) already done", resumed.stdout)
     assert counts and int(counts[2]) == finished >= 1, resumed.stdout
-    assert len(list((out / "results").glob("*.csv"))) == int(counts[1])
+    assert len(list((out / "results").glob("*.csv.gz"))) == int(counts[1])
     assert (out / "boxplot_s-full-arm.png").exists()
 
 

@@ -1,27 +1,44 @@
 """The evaluation's folder: per-task results, failures and ``protocol.json``.
 
 Only the driver writes here. A task's payload becomes ``results/<task>.json`` (its
-environment and wall times) and then ``results/<task>.csv`` (its errors), each written
-to a temporary file and renamed, so a result file is always complete. A task counts as
-done when its CSV exists: a stopped evaluation resumes with the others, whichever
-executor ran the finished ones.
+environment and wall times) and then ``results/<task>.csv.gz`` (its errors, gzip with
+no time stamp, so the same errors give the same bytes), each written to a temporary file
+and renamed, so a result file is always complete. A task counts as done when its errors
+file exists: a stopped evaluation resumes with the others, whichever executor ran the
+finished ones. Compressed, the full protocol's 360 results take about 13 MB instead of
+75, small enough to commit, so a protocol run in slices on machines that do not keep
+their files resumes from a clone. Plain ``results/<task>.csv`` files (older folders)
+are read too.
 """
 
 from __future__ import annotations
 
 import csv
+import gzip
+import io
 import json
 import os
 from pathlib import Path
 
 from drake_tracker.evaluation.tasks import Task, environment
 
+_ERRORS_SUFFIXES = (".csv.gz", ".csv")  # written, then read as well (older folders)
 
-def _write_atomic(path: Path, text: str) -> None:
+
+def _write_atomic(path: Path, data: str | bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
+    if isinstance(data, bytes):
+        tmp.write_bytes(data)
+    else:
+        tmp.write_text(data)
     os.replace(tmp, path)
+
+
+def _read_errors(path: Path) -> list[dict]:
+    raw = path.read_bytes()
+    text = gzip.decompress(raw).decode() if path.name.endswith(".gz") else raw.decode()
+    return list(csv.DictReader(io.StringIO(text)))
 
 
 class ResultStore:
@@ -32,28 +49,40 @@ class ResultStore:
         self.results_dir = self.out_dir / "results"
 
     def result_path(self, name: str) -> Path:
-        """``results/<name>.csv``, whose existence marks task ``name`` done."""
-        return self.results_dir / f"{name}.csv"
+        """``results/<name>.csv.gz``, the errors file written for task ``name``."""
+        return self.results_dir / f"{name}{_ERRORS_SUFFIXES[0]}"
+
+    def stored_errors(self, name: str) -> Path | None:
+        """The errors file of task ``name`` (compressed, or an older plain CSV), if any."""
+        for suffix in _ERRORS_SUFFIXES:
+            path = self.results_dir / f"{name}{suffix}"
+            if path.exists():
+                return path
+        return None
 
     def is_done(self, task: Task) -> bool:
-        """Whether ``task``'s result CSV exists (a resumed evaluation skips it)."""
-        return self.result_path(task.name).exists()
+        """Whether ``task``'s errors file exists (a resumed evaluation skips it)."""
+        return self.stored_errors(task.name) is not None
 
     def write(self, payload: dict) -> None:
         """Writes a task's payload (from :func:`~.tasks.compute_task`), CSV last."""
         name = payload["name"]
         meta = {k: v for k, v in payload.items() if k != "csv"}
         _write_atomic(self.results_dir / f"{name}.json", json.dumps(meta, indent=1))
-        _write_atomic(self.result_path(name), payload["csv"])
+        _write_atomic(self.result_path(name),
+                      gzip.compress(payload["csv"].encode(), compresslevel=9, mtime=0))
 
     def load_rows(self, tasks: list[Task] | None = None) -> list[dict]:
-        """Every stored error sample (of ``tasks`` only, if given)."""
-        names = None if tasks is None else {t.name for t in tasks}
+        """Every stored error sample (of ``tasks`` only, if given), in task-name order."""
+        paths = {}
+        for suffix in reversed(_ERRORS_SUFFIXES):  # a compressed file wins over a plain one
+            for path in self.results_dir.glob(f"*{suffix}"):
+                paths[path.name.removesuffix(suffix)] = path
+        wanted = None if tasks is None else {t.name for t in tasks}
         rows = []
-        for path in sorted(self.results_dir.glob("*.csv")):
-            if names is None or path.stem in names:
-                with path.open() as f:
-                    rows.extend(csv.DictReader(f))
+        for name in sorted(paths):
+            if wanted is None or name in wanted:
+                rows.extend(_read_errors(paths[name]))
         return rows
 
     def load_metas(self, tasks: list[Task]) -> list[dict]:
