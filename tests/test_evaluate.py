@@ -233,6 +233,7 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     (env,) = protocol["task_environments"]
     assert set(env["versions"]) == {"drake", "numpy", "numba", "llvmlite", "python"}
     assert env["cpu"] and env["numba_threads"] >= 1 and env["tasks"] == 1
+    assert env["compile_target"]  # e.g. znver4: what the kernels' rounding depends on
     # Resuming with another protocol in the same folder is refused, by name.
     other = Task("s-full-arm", "constant", 0, 2.0, 0.1, ("encoders_only", "full_fusion"))
     with pytest.raises(ValueError, match="another protocol"):
