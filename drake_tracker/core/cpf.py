@@ -316,7 +316,6 @@ def annealed_coordinate_particle_filter(
             proposal = CoordinateMixture(result.mean, std, p_proposal, s_jump)
     result.num_resamples = resamples
     result.num_evaluations = evaluations
-    if flat:  # every sweep flat: the prior, whatever the sweeps' proposals were
-        result.mean, result.variance = prior_mean.copy(), prior_std**2
+    # Every sweep flat: the last sweep already returned the prior's moments exactly.
     result.flat_likelihood = flat
     return result

@@ -74,15 +74,13 @@ class ResultStore:
 
     def load_rows(self, tasks: list[Task] | None = None) -> list[dict]:
         """Every stored error sample (of ``tasks`` only, if given), in task-name order."""
-        paths = {}
-        for suffix in reversed(_ERRORS_SUFFIXES):  # a compressed file wins over a plain one
-            for path in self.results_dir.glob(f"*{suffix}"):
-                paths[path.name.removesuffix(suffix)] = path
-        wanted = None if tasks is None else {t.name for t in tasks}
+        names = {path.name.removesuffix(suffix) for suffix in _ERRORS_SUFFIXES
+                 for path in self.results_dir.glob(f"*{suffix}")}
+        if tasks is not None:
+            names &= {t.name for t in tasks}
         rows = []
-        for name in sorted(paths):
-            if wanted is None or name in wanted:
-                rows.extend(_read_errors(paths[name]))
+        for name in sorted(names):
+            rows.extend(_read_errors(self.stored_errors(name)))
         return rows
 
     def load_metas(self, tasks: list[Task]) -> list[dict]:
