@@ -171,12 +171,13 @@ class Tracker:
             self.next_image_due_s = self.images.next_due(t, self.next_image_due_s)
         self.last_result = outcome.result
         if outcome.observation is None and outcome.consistency is not None:
-            self.health = next_health(self.health, outcome.consistency, self.params.health)
+            self.health = next_health(self.health, outcome.consistency, self.params.health,
+                                      challenger=outcome.challenger)
             return self._skip(frame, outcome.skip_reason, "images that show no arm")
         if outcome.observation is None:
             return self._skip(frame, "no valid depth pixel", "images without a valid pixel")
         self.health = next_health(self.health, outcome.consistency, self.params.health,
-                                  outcome.restarted, outcome.misplaced)
+                                  outcome.restarted, outcome.misplaced, outcome.challenger)
         self.buffer.add_image_observation(anchor, outcome.observation)
         self.last_applied_image_s = max(t, self.last_applied_image_s)
         self.num_images_applied += 1

@@ -136,6 +136,13 @@ class HealthParams:
     #: an occluder, the health said tracking, and the update folded the elbow (j4 -119
     #: deg, 997 mm) with 99 % of its pixels agreeing, for good.
     second_opinion_on_reacquisition: bool = True
+    #: While some joint's bias estimate lies beyond this many standard deviations of the
+    #: bias model's spread (stationary or initial, and one jump: 10.3 deg by default), a
+    #: challenger belief searches from the encoders' arm (``core/second_opinion.py``).
+    #: 2.25: 23 deg by default. 0: never.
+    challenger_bias_sigmas: float = 2.25
+    #: Images a challenger searches for, then rests as long.
+    challenger_images: int = 20
 
     def validate(self) -> None:
         """Raises ValueError naming the field."""
@@ -154,10 +161,28 @@ class HealthParams:
              "must be in [0, 1] (0: never)"),
             ("second_opinion_margin_nats", 0 <= self.second_opinion_margin_nats < 1e6,
              "must be in [0, 1e6)"),
+            ("challenger_bias_sigmas", 0 <= self.challenger_bias_sigmas < 1e3,
+             "must be in [0, 1e3) (0: never)"),
+            ("challenger_images", self.challenger_images >= 1, "must be >= 1"),
         )
         for name, ok, why in checks:
             if not ok:
                 raise ValueError(f"health.{name} = {getattr(self, name)!r}: {why}")
+
+
+@dataclass(frozen=True)
+class Challenger:
+    """A second belief about the angles, held relative to the encoders' arm (so it
+    follows the readings between images, as a bias does): angle ``offset_mean`` (n,)
+    and ``offset_var`` (rad, rad^2) from the restart's mean; ``time_s``, the image time
+    of its latest update; ``images``, the images it has seen. It searches for
+    ``HealthParams.challenger_images`` images, then rests as long (no search: a robot whose biases
+    really are that large pays at most half the time), then may start again."""
+
+    offset_mean: np.ndarray
+    offset_var: np.ndarray
+    time_s: float
+    images: int = 0
 
 
 @dataclass(frozen=True)
@@ -182,6 +207,8 @@ class TrackerHealth:
     #: out of view (fewer than ``min_robot_pixels`` on valid pixels): the arm left the view,
     #: rather than only hiding behind something (``is_reacquiring``).
     left_view: bool = False
+    #: The challenger belief, while one searches or rests (``core/second_opinion.py``).
+    challenger: Challenger | None = None
 
 
 def is_consistent(image: ImageConsistency, params: HealthParams) -> bool:
@@ -255,11 +282,13 @@ def restart_due(health: TrackerHealth, time_s: float, params: HealthParams) -> b
 
 
 def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthParams,
-                restarted: bool = False, misplaced: bool = False) -> TrackerHealth:
+                restarted: bool = False, misplaced: bool = False,
+                challenger: Challenger | None = None) -> TrackerHealth:
     """The health after one more image (a pure function, so the Drake system can keep
     its state in the Context); ``restarted``: the belief was restarted from the encoders
     before this image's update (``image`` then compares it with the restarted belief),
-    which forgets that the arm was acquired; ``misplaced``: see ``is_misplaced``."""
+    which forgets that the arm was acquired; ``misplaced``: see ``is_misplaced``;
+    ``challenger``: the challenger belief after this image."""
     if restarted:
         health = replace(health, confirmed_s=-float("inf"), disagreeing_in_a_row=0,
                          restarts=health.restarts + 1)
@@ -282,4 +311,4 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
     left_view = state != HealthState.TRACKING and (
         health.left_view or image.robot_pixels < params.min_robot_pixels)
     return TrackerHealth(state, image, bad, good, confirmed, acquired, health.restarts, since,
-                         left_view)
+                         left_view, challenger)

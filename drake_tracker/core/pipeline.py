@@ -27,6 +27,7 @@ from drake_tracker.core.cpf import CPFResult
 from drake_tracker.core.depth_units import check_depth_units
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import (
+    Challenger,
     ImageConsistency,
     TrackerHealth,
     agreeing_pixels,
@@ -53,6 +54,7 @@ from drake_tracker.core.occlusion import (
     pixel_occlusion,
     with_pixel_occlusion,
 )
+from drake_tracker.core.second_opinion import EncoderSearch, plausible_bias_std
 from drake_tracker.params import (
     TrackerParams,
     joint_noise_for,
@@ -90,6 +92,8 @@ class ImageOutcome:
     misplaced: bool = False
     #: Why the image was not applied (observation None), if not for lack of valid pixels.
     skip_reason: str = ""
+    #: The challenger belief after this image (``core/second_opinion.py``).
+    challenger: Challenger | None = None
 
 
 class ImageProcessor:
@@ -119,6 +123,14 @@ class ImageProcessor:
             model, camera, blocks, im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
             tuple(im.annealing_betas), tuple(im.sweep_image_widths_px))
+        robot = np.isin(model.joint_names, model.robot_joint_names)
+        spread = plausible_bias_std(*(np.array([getattr(j, f) for j in noise]) for f in (
+            "bias_process_std_rad_per_sqrt_s", "bias_decay_per_s", "initial_bias_std_rad",
+            "bias_jump_std_rad", "bias_jump_rate_per_s")))
+        self.search = EncoderSearch(
+            self.update, params, self._occlusion_aware,
+            np.where(robot & np.array([j.has_bias for j in noise]), spread, np.inf),
+            np.array([j.bias_process_std_rad_per_sqrt_s for j in noise]) ** 2)
 
     def image_time(self, frame: DepthFrame) -> float:
         """The time t' (s) ``frame`` is applied at: :func:`image_time` with these parameters."""
@@ -199,7 +211,8 @@ class ImageProcessor:
                 restarted, misplaced, acquired = True, False, False
                 prior, rendered, predicted = candidate, rendered_enc, encoders
             elif shows_no_arm(predicted, encoders, health, self.params.health):
-                return ImageOutcome(None, None, predicted, skip_reason=(
+                return ImageOutcome(None, None, predicted, challenger=health.challenger,
+                                    skip_reason=(
                     f"it sees through {predicted.see_through:.0%} of the arm where the "
                     f"estimate puts it and {encoders.see_through:.0%} where the encoders do: "
                     f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
@@ -236,8 +249,17 @@ class ImageProcessor:
         if self.params.use_joint_readings and not restarted and (
                 is_reacquiring(health, predicted, self.params.health) if not acquired
                 else is_surprising(predicted, self.params.health, health.latest)):
-            alternative = self._search_from_encoders(plain, candidate, rendered_enc,
+            alternative = self.search.second_opinion(plain, candidate, rendered_enc,
                                                      encoders, result, rng, frame.sequence)
+            if alternative is not None:
+                restarted, misplaced, prior, result = True, False, candidate, alternative
+        # While the estimate's biases are implausible, a challenger belief searches from
+        # the encoders' arm over several images (see core/second_opinion.py).
+        challenger = None
+        if self.params.use_joint_readings and not restarted:
+            alternative, challenger = self.search.challenge(
+                plain, prior, candidate, result, health.challenger, predicted.time_s, rng,
+                frame.sequence)
             if alternative is not None:
                 restarted, misplaced, prior, result = True, False, candidate, alternative
         # A degenerate particle set would claim certainty; floor the posterior variance
@@ -251,7 +273,8 @@ class ImageProcessor:
             observation = AngleObservation.from_posterior(prior, result.mean, variance)
         if restarted:
             observation = replace(observation, restart=self.restart)
-        return ImageOutcome(observation, result, predicted, restarted, misplaced)
+        return ImageOutcome(observation, result, predicted, restarted, misplaced,
+                            challenger=challenger)
 
     def restart_reason(self, estimate: ImageConsistency, encoders: ImageConsistency,
                        health: TrackerHealth) -> str:
@@ -291,32 +314,6 @@ class ImageProcessor:
         fraction = image_occlusion(predicted, image.likelihood, image.occlusion_prior_pixels)
         return with_pixel_occlusion(observation,
                                     pixel_occlusion(observation, rendered, fraction))
-
-    def _search_from_encoders(self, plain, candidate: np.ndarray, rendered: np.ndarray,
-                              encoders: ImageConsistency, result: CPFResult,
-                              rng: np.random.Generator, sequence: int) -> CPFResult | None:
-        """A second opinion on a surprising image (``is_surprising``): the start-up search
-        from the encoders' arm (the restart's prior). Its answer replaces the update's when
-        the image's log-likelihood at its mean beats the update's by
-        ``health.second_opinion_margin_nats`` (both scored on the image without the
-        occlusion estimate); else None. Measured: after a bias step the update put a
-        wrong fold of two joints (-28 deg, +25 deg) that explained the image at 94 %
-        agreement, 300 mm off, 1300 nats below the truth, and followed it for good."""
-        health = self.params.health
-        observation = self._occlusion_aware(plain, rendered, encoders)
-        alternative = self.update(candidate, observation, rng, None, None,
-                                  self.params.image.acquisition_num_particles,
-                                  coarse_sweeps=False)
-        scores = self.update.log_likelihood(np.stack([result.mean, alternative.mean]), plain)
-        if scores[1] <= scores[0] + health.second_opinion_margin_nats:
-            log.debug("image %d: the search from the encoders' arm scored %.0f against the "
-                      "update's %.0f: kept the update", sequence, scores[1], scores[0])
-            return None
-        log.warning("image %d at %.3f s: it contradicts the estimate's arm, and a search "
-                    "from the encoders' arm explains it better (log-likelihood %.0f against "
-                    "%.0f); the belief restarts from there", sequence, encoders.time_s,
-                    scores[1], scores[0])
-        return alternative
 
     def consistent(self, image: ImageConsistency) -> bool:
         """``is_consistent`` under the tracker's health parameters."""

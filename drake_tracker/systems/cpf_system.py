@@ -133,7 +133,8 @@ class CpfImageUpdateSystem(LeafSystem):
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(frame, f"{type(err).__name__}: {err}")
         if outcome.observation is None and outcome.consistency is not None:
-            s.health = next_health(s.health, outcome.consistency, self._health_params)
+            s.health = next_health(s.health, outcome.consistency, self._health_params,
+                                   challenger=outcome.challenger)
             return self._skip(frame, outcome.skip_reason)
         if outcome.observation is None:
             return self._skip(frame, "no valid depth pixel")
@@ -141,7 +142,7 @@ class CpfImageUpdateSystem(LeafSystem):
                                             prior.image_time_s, outcome.observation,
                                             prior.anchor)
         s.health = next_health(s.health, outcome.consistency, self._health_params,
-                               outcome.restarted, outcome.misplaced)
+                               outcome.restarted, outcome.misplaced, outcome.challenger)
         s.last_applied_image_s = max(t, s.last_applied_image_s)
         return True
 
