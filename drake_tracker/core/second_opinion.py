@@ -72,10 +72,10 @@ def challenger_prior(candidate: np.ndarray, challenger: Challenger | None, time_
     (the encoders' arm, angle variance the tracker's initial one) shifted by the
     challenger's offset, its angle variance the offset's grown by the bias random walk
     since its last image, never above the restart's; a new challenger's is the
-    restart's. Measured on the protocol's occlusion/time-varying seeds 0 and 1 (median
-    / p75 from 5 s): 10.1 / 47.4 and 6.6 / 49.4 mm; starting instead as wide as the
-    bias prior (5.7 deg, as the tracker's start effectively is), 13.6 / 51.6 and 17.3 /
-    133.5 (the code before: 47.3 / 383.2 and 15.5 / 130.7)."""
+    restart's. Measured on the protocol's occlusion/time-varying runs, median / p75
+    from 5 s, tracker seed 0: simulation seed 0 10.1 / 47.4 mm (the code before: 47.3 /
+    383.2), simulation seed 1 6.6 / 49.4; starting instead as wide as the bias prior
+    (5.7 deg, as the tracker's start effectively is), 13.6 / 51.6 and 17.3 / 133.5."""
     if challenger is None:
         return candidate
     prior = candidate.copy()
