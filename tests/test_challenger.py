@@ -11,9 +11,8 @@ import logging
 import numpy as np
 import pytest
 from fast_params import small_params
-from test_restart import CAMERA, hand_error_mm
+from test_restart import CAMERA, assert_restarts_alike_offline_and_in_the_diagram, hand_error_mm
 from test_second_opinion import prior_at, scene  # noqa: F401  (the fixture)
-from test_timestamps import assert_same_when_settled, feed, simulate
 
 from drake_tracker.core.health import Challenger, HealthParams, TrackerHealth, next_health
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A
@@ -24,8 +23,6 @@ from drake_tracker.core.second_opinion import (
     plausible_bias_std,
 )
 from drake_tracker.params import TrackerParams
-from drake_tracker.synthetic import synthetic_run
-from drake_tracker.tracker import Tracker
 
 #: A bend far beyond the bias model (23 deg is the default's trigger).
 BEND_DEG = {"arm_joint_4": 40.0}
@@ -153,20 +150,12 @@ def test_a_challenger_rests_as_long_as_it_searched(scene):  # noqa: F811
 def test_a_challenger_gives_the_same_estimates_offline_and_in_the_diagram(apollo, caplog):
     """Forced: any bias beyond 0.01 of the spread is implausible and any gain is
     adopted; the update has 5 particles against the challenger's 150."""
-    run = synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7,
-                        bias_rad=np.radians(0.5))
     p = small_params()
     p.health.second_opinion_agreement = 0.0
     p.health.challenger_bias_sigmas, p.health.second_opinion_margin_nats = 0.01, 0.0
     p.image.num_particles = 5
-    offline_tracker = Tracker(apollo, run.camera_intrinsics, p)
-    with caplog.at_level(logging.WARNING):
-        offline, applied = feed(offline_tracker, run)
-    assert "a challenger searched from the encoders' arm" in caplog.text
-    assert offline_tracker.health.restarts >= 1
-    diagram, images_applied = simulate(apollo, run, p)
-    assert images_applied == sum(applied.values())
-    assert_same_when_settled(run, diagram, offline)
+    assert_restarts_alike_offline_and_in_the_diagram(
+        apollo, p, 0.5, caplog, "a challenger searched from the encoders' arm")
 
 
 def test_an_estimate_out_of_view_is_challenged_at_the_first_image(apollo_out_of_view):

@@ -6,6 +6,7 @@ nothing and contradicts nothing, so no image update can move it; the restart is 
 brings it back.
 """
 
+import logging
 from dataclasses import replace
 
 import numpy as np
@@ -189,17 +190,27 @@ def test_an_image_that_scores_every_particle_the_same_leaves_the_belief(scene):
     np.testing.assert_allclose(outcome.observation.apply(prior), prior, rtol=1e-12, atol=0)
 
 
-def test_a_restart_gives_the_same_estimates_offline_and_in_the_diagram(apollo):
+def assert_restarts_alike_offline_and_in_the_diagram(apollo, params, bias_deg: float,
+                                                    caplog, message: str = "") -> None:
+    """Feeds a 0.5 s synthetic run (a constant ``bias_deg`` on the encoders) to the
+    offline tracker, which must restart at least once (logging ``message``, if given),
+    and simulates it in the Diagram: the same images applied, the same estimates."""
+    run = synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7,
+                        bias_rad=np.radians(bias_deg))
+    offline_tracker = Tracker(apollo, run.camera_intrinsics, params)
+    with caplog.at_level(logging.WARNING):
+        offline, applied = feed(offline_tracker, run)
+    assert message in caplog.text
+    assert offline_tracker.health.restarts >= 1
+    diagram, images_applied = simulate(apollo, run, params)
+    assert images_applied == sum(applied.values())
+    assert_same_when_settled(run, diagram, offline)
+
+
+def test_a_restart_gives_the_same_estimates_offline_and_in_the_diagram(apollo, caplog):
     """The restart travels in the image's observation through the Diagram's delay buffer
     as through the offline tracker's. Forced here: every image whose estimate renders
     under 99 % of the encoders' arm restarts (the run's arm has a constant bias)."""
-    run = synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7,
-                        bias_rad=np.radians(4.0))
     p = small_params()
     p.health.misplaced_fraction, p.health.restart_after_misplaced_s = 0.99, 0.0
-    offline_tracker = Tracker(apollo, run.camera_intrinsics, p)
-    offline, applied = feed(offline_tracker, run)
-    assert offline_tracker.health.restarts >= 1
-    diagram, images_applied = simulate(apollo, run, p)
-    assert images_applied == sum(applied.values())
-    assert_same_when_settled(run, diagram, offline)
+    assert_restarts_alike_offline_and_in_the_diagram(apollo, p, 4.0, caplog)

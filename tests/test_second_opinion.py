@@ -13,8 +13,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from fast_params import small_params
-from test_restart import CAMERA, apollo_in_view, hand_error_mm
-from test_timestamps import assert_same_when_settled, feed, simulate
+from test_restart import (
+    CAMERA,
+    apollo_in_view,
+    assert_restarts_alike_offline_and_in_the_diagram,
+    hand_error_mm,
+)
 
 from drake_tracker.core.health import (
     HealthParams,
@@ -26,8 +30,6 @@ from drake_tracker.core.health import (
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A
 from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
 from drake_tracker.params import TrackerParams
-from drake_tracker.synthetic import synthetic_run
-from drake_tracker.tracker import Tracker
 
 FOLD_DEG = {"arm_joint_2": 8.0, "arm_joint_4": -12.0}
 ENCODER_BIAS_DEG = {"arm_joint_1": 3.0, "arm_joint_2": -3.0, "arm_joint_3": 3.0}
@@ -169,16 +171,8 @@ def test_a_second_opinion_gives_the_same_estimates_offline_and_in_the_diagram(ap
     travels in the observation: the Diagram follows the offline tracker. Forced here:
     every image with a disagreeing pixel is surprising, any gain is adopted, and the
     update has 5 particles against the search's 150, the encoders 0.5 deg off."""
-    run = synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7,
-                        bias_rad=np.radians(0.5))
     p = small_params()
     p.health.second_opinion_agreement, p.health.second_opinion_margin_nats = 1.0, 0.0
     p.image.num_particles = 5
-    offline_tracker = Tracker(apollo, run.camera_intrinsics, p)
-    with caplog.at_level(logging.WARNING):
-        offline, applied = feed(offline_tracker, run)
-    assert "search from the encoders' arm explains it better" in caplog.text
-    assert offline_tracker.health.restarts >= 1
-    diagram, images_applied = simulate(apollo, run, p)
-    assert images_applied == sum(applied.values())
-    assert_same_when_settled(run, diagram, offline)
+    assert_restarts_alike_offline_and_in_the_diagram(
+        apollo, p, 0.5, caplog, "search from the encoders' arm explains it better")

@@ -176,8 +176,9 @@ class Challenger:
     follows the readings between images, as a bias does): angle ``offset_mean`` (n,)
     and ``offset_var`` (rad, rad^2) from the restart's mean; ``time_s``, the image time
     of its latest update; ``images``, the images it has seen. It searches for
-    ``HealthParams.challenger_images`` images, then rests as long (no search: a robot whose biases
-    really are that large pays at most half the time), then may start again."""
+    ``HealthParams.challenger_images`` images, then rests as long (no search: a robot
+    whose biases really are that large pays at most half the time), then may start
+    again."""
 
     offset_mean: np.ndarray
     offset_var: np.ndarray

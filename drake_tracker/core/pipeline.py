@@ -54,7 +54,7 @@ from drake_tracker.core.occlusion import (
     pixel_occlusion,
     with_pixel_occlusion,
 )
-from drake_tracker.core.second_opinion import EncoderSearch, plausible_bias_std
+from drake_tracker.core.second_opinion import EncoderSearch
 from drake_tracker.params import (
     TrackerParams,
     joint_noise_for,
@@ -123,14 +123,8 @@ class ImageProcessor:
             model, camera, blocks, im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
             tuple(im.annealing_betas), tuple(im.sweep_image_widths_px))
-        robot = np.isin(model.joint_names, model.robot_joint_names)
-        spread = plausible_bias_std(*(np.array([getattr(j, f) for j in noise]) for f in (
-            "bias_process_std_rad_per_sqrt_s", "bias_decay_per_s", "initial_bias_std_rad",
-            "bias_jump_std_rad", "bias_jump_rate_per_s")))
-        self.search = EncoderSearch(
-            self.update, params, self._occlusion_aware,
-            np.where(robot & np.array([j.has_bias for j in noise]), spread, np.inf),
-            np.array([j.bias_process_std_rad_per_sqrt_s for j in noise]) ** 2)
+        self.search = EncoderSearch(self.update, params, self._occlusion_aware, noise,
+                                    np.isin(model.joint_names, model.robot_joint_names))
 
     def image_time(self, frame: DepthFrame) -> float:
         """The time t' (s) ``frame`` is applied at: :func:`image_time` with these parameters."""

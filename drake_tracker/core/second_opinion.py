@@ -38,7 +38,7 @@ from drake_tracker.core.occlusion import observed_image
 if TYPE_CHECKING:
     from drake_tracker.core.image_update import CpfImageUpdate
     from drake_tracker.core.likelihood import PreparedObservation
-    from drake_tracker.params import TrackerParams
+    from drake_tracker.params import JointNoise, TrackerParams
 
 log = logging.getLogger(__name__)
 
@@ -89,16 +89,25 @@ def challenger_prior(candidate: np.ndarray, challenger: Challenger | None, time_
 class EncoderSearch:
     """The second opinion and the challenger, over one image update (``update``: a
     ``CpfImageUpdate``); ``occlusion_aware(observation, rendered, consistency)`` reads
-    the per-pixel occlusion at a rendered arm (``ImageProcessor._occlusion_aware``)."""
+    the per-pixel occlusion at a rendered arm (``ImageProcessor._occlusion_aware``);
+    ``noise``, each joint's noise model; ``robot``, (n,) which joints are the robot's
+    (the virtual camera joints' biases are never implausible)."""
 
     def __init__(self, update: CpfImageUpdate, params: TrackerParams,
-                 occlusion_aware: Callable,
-                 plausible_std: np.ndarray, growth_var_per_s: np.ndarray) -> None:
+                 occlusion_aware: Callable, noise: list[JointNoise],
+                 robot: np.ndarray) -> None:
         self.update = update
         self.params = params
         self._occlusion_aware = occlusion_aware
-        self.plausible_std = plausible_std
-        self._growth = growth_var_per_s
+        sigma_b = np.array([j.bias_process_std_rad_per_sqrt_s for j in noise])
+        spread = plausible_bias_std(
+            sigma_b, np.array([j.bias_decay_per_s for j in noise]),
+            np.array([j.initial_bias_std_rad for j in noise]),
+            np.array([j.bias_jump_std_rad for j in noise]),
+            np.array([j.bias_jump_rate_per_s for j in noise]))
+        has_bias = np.array([j.has_bias for j in noise])
+        self.plausible_std = np.where(np.asarray(robot, bool) & has_bias, spread, np.inf)
+        self._growth = sigma_b ** 2  # the bias random walk's variance per second
 
     def _beats(self, result: CPFResult, alternative: CPFResult,
                plain: PreparedObservation) -> tuple[bool, np.ndarray]:
@@ -134,9 +143,9 @@ class EncoderSearch:
                   ) -> tuple[CPFResult | None, Challenger | None]:
         """One image of the challenger. Returns (its answer if it beats the update's
         ``result``, else None; the challenger after this image, None once it won or is no
-        longer needed). It starts while the
-        estimate (``prior``) has an implausible bias, and searches from ``candidate``
-        (the restart's belief at this image) for ``health.challenger_images`` images."""
+        longer needed). It starts while the estimate (``prior``) has an implausible bias,
+        and searches from ``candidate`` (the restart's belief at this image) for
+        ``health.challenger_images`` images."""
         health = self.params.health
         implausible = implausible_biases(prior, self.plausible_std,
                                          health.challenger_bias_sigmas)
@@ -146,8 +155,8 @@ class EncoderSearch:
         if images >= 2 * health.challenger_images:  # rested: a fresh start if still needed
             challenger, images = None, 0
         if images >= health.challenger_images:  # resting
-            return None, Challenger(challenger.offset_mean, challenger.offset_var,
-                                               time_s, images + 1)
+            return None, Challenger(challenger.offset_mean, challenger.offset_var, time_s,
+                                    images + 1)
         ch_prior = challenger_prior(candidate, challenger, time_s, self._growth)
         rendered = self.update.renderer.render(ch_prior[MEAN_A][None])[0]
         seen = image_consistency(time_s, rendered, observed_image(plain),
@@ -172,6 +181,5 @@ class EncoderSearch:
             return None, None
         floor = ch_prior[VAR_A] / self.update.num_particles
         return None, Challenger(alternative.mean - candidate[MEAN_A],
-                                           np.maximum(alternative.variance, floor),
-                                           time_s, images + 1)
+                                np.maximum(alternative.variance, floor), time_s, images + 1)
 
