@@ -6,11 +6,12 @@ update (particles per block x blocks x annealing layers):
 * ``updates_per_s``: whole CPF image updates per second, per numba thread count (wall
   clock), and ``updates_per_cpu_s`` per second of this process's CPU time (summed over
   its threads): on a shared machine, the one-thread CPU figure is what an idle core gives;
-* ``python_us_per_block``: the part of an update spent outside the scoring kernel
-  (the CPF's Python: sampling, weights, resampling, moments), per block call;
+* ``python_us_per_block``: the part of an update spent outside the compiled sweeps
+  (scoring kernel and CPF block loop: :mod:`drake_tracker.core.cpf_compiled`), per
+  block call;
 * ``stage_us_per_evaluation``: ``fk``, ``raster``, ``likelihood``, ``score`` (what the
   filter runs: the three fused) and ``render`` (images written to memory), CPU time, one
-  thread, called with the CPF's batch size (see :func:`_stages`);
+  thread, on the configurations one image update scores (see :func:`_stages`);
 * ``drake_us_per_image``: Drake's RenderEngineVtk on the same configurations (one
   ``RenderDepthImage`` each, scoring excluded), and its ratio to ``score``;
 * agreement of the rendered images with Drake's (robot/background label, depth);
@@ -104,7 +105,6 @@ def bench_robot(model: TrackerModel, camera: CameraIntrinsics, params: TrackerPa
     """The figures of the module docstring for one robot (``camera``: full resolution)."""
     update = make_update(model, camera, params)
     renderer = update.renderer
-    view = default_view_configuration(model)
     observation = test_observation(update)
     prior = tracking_prior(model)
     previous = numba.get_num_threads()
@@ -114,7 +114,7 @@ def bench_robot(model: TrackerModel, camera: CameraIntrinsics, params: TrackerPa
             numba.set_num_threads(min(t, numba.config.NUMBA_NUM_THREADS))
             per_threads[str(t)] = time_updates(update, observation, prior, repeats)
         numba.set_num_threads(1)
-        stages = _stages(update, observation, view, repeats)
+        stages = _stages(update, observation, prior, repeats)
     finally:
         numba.set_num_threads(previous)
     drake = _against_drake(model, renderer, num_drake)
@@ -140,19 +140,44 @@ def _full_resolution(image: np.ndarray, stride: int) -> np.ndarray:
     return np.repeat(np.repeat(image, stride, axis=0), stride, axis=1)
 
 
-def _stages(update: CpfImageUpdate, observation, view, repeats: int) -> dict:
-    """µs per evaluation of each stage, called in batches of the CPF's size, 1 thread:
-    ``fk`` (the batched FK call alone), ``raster`` (the fused kernel against an image with
-    a single valid pixel, away from the robot: FK, rasterising and the pixel scan, minus
-    ``fk``), ``likelihood`` (``score`` minus that), ``score`` (the fused kernel as the
-    filter runs it), and ``render`` (FK excluded, images written to memory)."""
+class _Recorder:
+    """A renderer stand-in that records the configurations the CPF scores (the Python
+    sweeps: the same particles as the compiled ones, which cannot be watched)."""
+
+    def __init__(self, renderer):
+        self.renderer, self.calls = renderer, []
+
+    def score(self, q, observation):
+        self.calls.append(np.array(q))
+        return self.renderer.score(q, observation)
+
+
+def cpf_configurations(update: CpfImageUpdate, observation: PreparedObservation,
+                       prior: np.ndarray) -> list[np.ndarray]:
+    """The configurations one image update scores, block call by block call (particles
+    of a CPF block are alike, which the batched kernel exploits: random configurations
+    would misstate its cost)."""
+    renderer = update.renderer
+    update.renderer = recorder = _Recorder(renderer)
+    try:
+        update(prior, observation, np.random.default_rng(0))
+    finally:
+        update.renderer = renderer
+    return recorder.calls
+
+
+def _stages(update: CpfImageUpdate, observation, prior, repeats: int) -> dict:
+    """µs per evaluation of each stage, on the configurations of one image update (block
+    call by block call), 1 thread, CPU time: ``fk`` (the batched FK call alone),
+    ``raster`` (the fused kernel against an image with a single valid pixel, away from
+    the robot: FK, rasterising and the pixel scan, minus ``fk``), ``likelihood``
+    (``score`` minus that), ``score`` (the fused kernel as the filter runs it), and
+    ``render`` (FK excluded, images written to memory)."""
     from drake_tracker.core.likelihood import prepare_observation
 
     renderer = update.renderer
-    evaluations = update.evaluations_per_image
-    q = random_configurations(renderer.model, evaluations, seed=1, spread_rad=0.02,
-                              center=view)
-    chunks = [q[i:i + update.num_particles] for i in range(0, len(q), update.num_particles)]
+    chunks = cpf_configurations(update, observation, prior)
+    evaluations = sum(len(c) for c in chunks)
     frame = renderer.model.camera_frame
     poses = [renderer.kinematics.relative_poses(c, frame) for c in chunks]
     one_pixel = np.full(observation.shape, np.nan, dtype=np.float32)

@@ -42,16 +42,18 @@ def _p_occ_inf(z, p):
 
 
 def _scalar_log_ratio(z, d, p):
-    """Direct transcription of SPEC §2 for one pixel."""
+    """Direct transcription of SPEC §2 for one pixel (without the truncation's
+    normaliser 1/(1 - e^{-λd}) for the independent occluder depth)."""
     if not (np.isfinite(z) and 0 < z <= p.max_depth_m) or not np.isfinite(d):
         return 0.0
     s = p.depth_noise_std_m + p.depth_noise_factor_per_m * z * z
     lam, w = p.occluder_rate_per_m, p.tail_weight
     p_vis = w / p.max_depth_m + (1 - w) * _normal_pdf(z, d, s)
     phi = 0.5 * (1 + math.erf((d - z + lam * s * s) / s / math.sqrt(2)))
+    norm = 1 / (1 - math.exp(-lam * d)) if p.occluder_depth == "truncated" else 1.0
     p_occ = (
         w / p.max_depth_m
-        + (1 - w) * lam / (1 - math.exp(-lam * d)) * math.exp(-lam * z + lam**2 * s**2 / 2) * phi
+        + (1 - w) * lam * norm * math.exp(-lam * z + lam**2 * s**2 / 2) * phi
     )
     p_all = (1 - p.occlusion_probability) * p_vis + p.occlusion_probability * p_occ
     return math.log(p_all) - math.log(_p_occ_inf(z, p))
@@ -115,29 +117,57 @@ def test_bad_images_are_rejected():
         LikelihoodParams(occlusion_probability=1.0).validate()
 
 
-def test_fused_pixel_kernel_equals_scalar_formula():
-    """The branch-free pixel loop of the fused kernel (erfc table, safe fastmath flags)
-    against the direct transcription, term by term, over depths that reach both ends of
-    the erfc table (rendered far behind and far in front of the observation)."""
-    from drake_tracker.core.render_likelihood import _ERFC_COEFFS, pixel_log_ratios
+@pytest.mark.parametrize("occluder_depth", ["truncated", "independent"])
+def test_lane_pixel_scores_equal_the_scalar_formula(occluder_depth):
+    """The fused kernel's pixel term, 8 particles at a time (lane_pixel_scores: exp, log
+    and erfc from polynomials), against the direct transcription, term by term, over
+    depths that reach both ends of erfc's range (rendered far behind and far in front
+    of the observation) and lanes with nothing rendered."""
+    from numba import njit
 
+    from drake_tracker.core.lane_likelihood import (
+        PIXELS_PER_CALL,
+        lane_pixel_scores,
+        lane_pixel_scores_truncated,
+    )
+    from drake_tracker.core.lanes import LANES
+
+    @njit
+    def score(zb, offsets, pixels, acc, table, uniform, lam, occlusion, truncation):
+        for k in range(0, offsets.shape[0] - PIXELS_PER_CALL + 1, PIXELS_PER_CALL):
+            if truncation != 0.0:
+                lane_pixel_scores_truncated(zb, offsets, pixels, k, acc, table, uniform, lam,
+                                            occlusion, truncation)
+            else:
+                lane_pixel_scores(zb, offsets, pixels, k, acc, table, uniform, lam,
+                                  occlusion, truncation)
+
+    params = LikelihoodParams(**{**PARAMS.__dict__, "occluder_depth": occluder_depth})
     rng = np.random.default_rng(5)
     z = np.concatenate([rng.uniform(0.2, 5.9, 300), [0.3, 5.9, 1.0, 1.0]])
-    d = np.concatenate([z[:100] + rng.normal(0.0, 0.01, 100),  # near the peak
-                        rng.uniform(0.1, 6.0, 200),  # anywhere
-                        [0.1, 6.0, 1.0 + 1e-12, 0.1]])  # ends of the table, exact hit
-    observation = prepare_observation(z[None, :].astype(np.float64), PARAMS)
-    slots = np.arange(len(z), dtype=np.int64)
-    terms = np.empty(len(z))
+    observation = prepare_observation(z[None, :].astype(np.float64), params)
+    pixels = np.arange(len(z))
+    spread = rng.choice([1e-3, 1e-2, 0.1, 3.0], size=(len(z), LANES))
+    d = np.clip(z[:, None] + spread * rng.normal(size=(len(z), LANES)), 0.1, 6.0)
+    d[-4:, 0] = [0.1, 6.0, 1.0 + 1e-12, 0.1]  # the ends of the range, an exact hit
+    inverse = np.where(rng.random(d.shape) < 0.15, 0.0, 1.0 / d)  # 0: nothing rendered
+    zb = np.concatenate([inverse.ravel(), np.zeros(LANES)])
+    acc = np.zeros(LANES)
     o = observation
-    pixel_log_ratios(slots, d, len(z), o.z, o.inv_sigma, o.lam_sigma2, o.gauss_coeff,
-                     o.occ_coeff, o.log_p_occ_inf, o.uniform, o.occluder_rate_per_m,
-                     o.occlusion_probability, o.truncation, _ERFC_COEFFS, terms,
-                     np.empty((4, len(z))))
-    expected = np.array([_scalar_log_ratio(a, b, PARAMS) for a, b in zip(z, d)])
-    assert np.ptp(expected) > 5.0
-    # Stated tolerance: 1e-12 of the term's size (erfc table ~1e-15 absolute, FMA rounding).
-    np.testing.assert_allclose(terms, expected, rtol=1e-12, atol=1e-12)
+    score(zb, np.arange(len(z)) * LANES, pixels, acc, o.pixel_table, o.uniform,
+          o.occluder_rate_per_m, o.occlusion_probability, o.truncation)
+    # the kernel scores the rendered image's float32 depth
+    depth = np.full(inverse.shape, np.inf)
+    np.divide(1.0, inverse, out=depth, where=inverse > 0)
+    depth = np.where(inverse > 0, depth.astype(np.float32).astype(np.float64), np.inf)
+    terms = np.array([[_scalar_log_ratio(z[p], depth[p, lane], params)
+                       for lane in range(LANES)] for p in pixels])
+    assert np.ptp(terms) > 5.0
+    # Stated tolerance: 1e-13 of the sum of the terms' sizes (erfcx fit 3e-13 relative,
+    # exp and log to a few ulps); the scores are sums over pixels.
+    np.testing.assert_allclose(acc, terms.sum(axis=0), rtol=0,
+                               atol=1e-13 * np.abs(terms).sum(axis=0).max())
+    assert not zb.any()  # the scored pixels are cleared for the next batch
 
 
 def test_independent_occluder_depth_by_numerical_integration():

@@ -89,7 +89,7 @@ def test_serial_and_parallel_kernels_give_identical_scores():
                                       LikelihoodParams())
     q = np.ascontiguousarray(random_configurations(model, 37, seed=2, spread_rad=0.05,
                                                    center=center))
-    args = (renderer._frame_tables, renderer._tables, renderer._planes,
+    args = (renderer._frame_tables, renderer._lane_tables, renderer._planes,
             (renderer._fx, renderer._fy, renderer._cx, renderer._cy), renderer.near_m,
             renderer.far_m, observation)
     previous = numba.get_num_threads()

@@ -162,20 +162,8 @@ def coordinate_particle_filter(
     sampling) wherever the proposal covers the posterior. Coordinates not yet sampled sit
     at the proposal's mean. Coordinates in no block keep their prior marginal.
     """
-    prior_mean = np.asarray(prior_mean, float)
-    prior_std = np.asarray(prior_std, float)
-    n = prior_mean.shape[0]
-    if prior_std.shape != (n,) or not np.all(np.isfinite(prior_std)) or np.any(prior_std < 0):
-        raise ValueError("prior_std must be finite, non-negative and match prior_mean")
-    if num_particles < 1:
-        raise ValueError(f"num_particles must be >= 1, got {num_particles}")
-    prior = prior if prior is not None else CoordinateMixture.gaussian(prior_mean, prior_std)
-    prior.check(n, "CPF prior")
-    if not (np.array_equal(prior.mean, prior_mean) and np.array_equal(prior.std, prior_std)):
-        raise ValueError("the CPF prior mixture's mean and std must be prior_mean, prior_std")
-    importance = proposal is not None or prior.has_jumps
-    proposal = proposal if proposal is not None else prior
-    proposal.check(n, "CPF proposal")
+    prior_mean, prior_std, prior, proposal, importance = checked_sweep(
+        prior_mean, prior_std, num_particles, prior, proposal)
     samples = np.tile(proposal.mean, (num_particles, 1))
     log_weights = np.zeros(num_particles)
     previous = np.zeros(num_particles)
@@ -202,6 +190,41 @@ def coordinate_particle_filter(
             previous = previous[children]
             log_weights = np.zeros(num_particles)
             resamples += 1
+    return finish_sweep(samples, log_weights, previous, blocks, prior_mean, prior_std,
+                        resamples, evaluations, block_max, flat)
+
+
+def checked_sweep(prior_mean: np.ndarray, prior_std: np.ndarray, num_particles: int,
+                  prior: CoordinateMixture | None, proposal: CoordinateMixture | None
+                  ) -> tuple[np.ndarray, np.ndarray, CoordinateMixture, CoordinateMixture,
+                             bool]:
+    """The arguments of a CPF sweep checked (ValueError naming the problem) and completed:
+    (prior_mean, prior_std, prior, proposal, importance), the prior a mixture, the
+    proposal the prior when none is given, and whether importance weights are needed."""
+    prior_mean = np.asarray(prior_mean, float)
+    prior_std = np.asarray(prior_std, float)
+    n = prior_mean.shape[0]
+    if prior_std.shape != (n,) or not np.all(np.isfinite(prior_std)) or np.any(prior_std < 0):
+        raise ValueError("prior_std must be finite, non-negative and match prior_mean")
+    if num_particles < 1:
+        raise ValueError(f"num_particles must be >= 1, got {num_particles}")
+    prior = prior if prior is not None else CoordinateMixture.gaussian(prior_mean, prior_std)
+    prior.check(n, "CPF prior")
+    if not (np.array_equal(prior.mean, prior_mean) and np.array_equal(prior.std, prior_std)):
+        raise ValueError("the CPF prior mixture's mean and std must be prior_mean, prior_std")
+    importance = proposal is not None or prior.has_jumps
+    proposal = proposal if proposal is not None else prior
+    proposal.check(n, "CPF proposal")
+    return prior_mean, prior_std, prior, proposal, importance
+
+
+def finish_sweep(samples: np.ndarray, log_weights: np.ndarray, previous: np.ndarray,
+                 blocks: Sequence[np.ndarray], prior_mean: np.ndarray, prior_std: np.ndarray,
+                 resamples: int, evaluations: int, block_max: list[float],
+                 flat: bool) -> CPFResult:
+    """The end of a CPF sweep: moment matching of the weighted particles (eqs. 14-15),
+    the prior kept for coordinates in no block, and for a flat likelihood (``flat``)."""
+    n = prior_mean.shape[0]
     weights = normalized_weights(log_weights)
     mean, variance = weighted_moments(samples, weights)
     in_blocks = np.zeros(n, bool)
@@ -221,9 +244,22 @@ def coordinate_particle_filter(
         effective_sample_size=float(1.0 / np.sum(weights**2)),
         num_evaluations=evaluations,
         log_likelihood_spread=float(previous.max() - previous.min()),
-        block_log_likelihood_max=block_max,
+        block_log_likelihood_max=list(block_max),
         flat_likelihood=flat,
     )
+
+
+def tempered_by(log_likelihood: Callable[[np.ndarray], np.ndarray],
+                beta: float) -> Callable[[np.ndarray], np.ndarray]:
+    """beta x ``log_likelihood``: its own ``scaled(beta)`` where it has one (a compiled
+    likelihood stays compiled), else a wrapper."""
+    if hasattr(log_likelihood, "scaled"):
+        return log_likelihood.scaled(beta)
+
+    def scored(q):
+        return beta * np.asarray(log_likelihood(q), float)
+
+    return scored
 
 
 def annealed_coordinate_particle_filter(
@@ -240,6 +276,7 @@ def annealed_coordinate_particle_filter(
     jump_std: np.ndarray | None = None,
     proposal_jump_fraction: float = 0.25,
     sweep_log_likelihoods: Sequence[Callable[[np.ndarray], np.ndarray] | None] = (),
+    sweep: Callable[..., CPFResult] | None = None,
 ) -> CPFResult:
     """CPF sweeps towards prior x likelihood^beta, for ``betas`` increasing to 1.
 
@@ -264,7 +301,12 @@ def annealed_coordinate_particle_filter(
     the sweeps with beta < 1 by a cheaper approximation (e.g. a coarser image); None
     entries keep it. Those sweeps only place the last sweep's proposal, which is weighted
     against the prior with ``log_likelihood`` itself (its entry must be None), so the
-    answer still estimates prior x likelihood.
+    answer still estimates prior x likelihood. A log-likelihood with a ``scaled(factor)``
+    method (a compiled one) is tempered through it rather than wrapped.
+
+    ``sweep``: runs one sweep, with the arguments of :func:`coordinate_particle_filter`
+    (default: that function; ``cpf_compiled.compiled_sweep`` runs the block loop of a
+    compiled log-likelihood in numba, with the same random draws and results).
 
     Why sweep more than once: the pixel likelihood is so peaked that one sweep, sampling
     block after block while the later blocks sit at a prior mean several degrees off,
@@ -298,16 +340,13 @@ def annealed_coordinate_particle_filter(
     resamples = evaluations = 0
     result = None
     flat = True
+    sweep = sweep or coordinate_particle_filter
     for layer, beta in enumerate(betas):
-        if beta == 1.0:
-            scored = log_likelihood
-        else:
-            def scored(q, beta=beta, tempered=sweeps[layer] or log_likelihood):
-                return beta * np.asarray(tempered(q), float)
+        scored = log_likelihood if beta == 1.0 else tempered_by(sweeps[layer] or log_likelihood,
+                                                                 beta)
         is_prior = layer == 0 and not prior.has_jumps
-        result = coordinate_particle_filter(prior_mean, prior_std, blocks, num_particles,
-                                            scored, rng, max_kl, prior,
-                                            None if is_prior else proposal)
+        result = sweep(prior_mean, prior_std, blocks, num_particles, scored, rng, max_kl, prior,
+                       None if is_prior else proposal)
         resamples += result.num_resamples
         evaluations += result.num_evaluations
         flat = flat and result.flat_likelihood

@@ -18,6 +18,7 @@ import numpy as np
 
 from drake_tracker.core.camera import CameraIntrinsics, stride_for_width, subsample
 from drake_tracker.core.cpf import CPFResult, annealed_coordinate_particle_filter
+from drake_tracker.core.cpf_compiled import CompiledLikelihood, compiled_sweep
 from drake_tracker.core.kalman import MEAN_A, VAR_A
 from drake_tracker.core.likelihood import (
     LikelihoodParams,
@@ -25,10 +26,12 @@ from drake_tracker.core.likelihood import (
     coarser_observation,
     prepare_observation,
 )
+from drake_tracker.core.render_batched import BatchedDepthRenderer
 from drake_tracker.core.renderer import make_renderer
 
 if TYPE_CHECKING:
-    from drake_tracker.core.render_batched import BatchedDepthRenderer
+    from collections.abc import Callable
+
     from drake_tracker.core.renderer import RenderThenScore
     from drake_tracker.robot import TrackerModel
 
@@ -142,9 +145,28 @@ class CpfImageUpdate:
         t0 = time.perf_counter()
         renderer = renderer or self.renderer
         out = renderer.score(q, observation)  # FK + render + pixel likelihood
-        self.times.render_s += time.perf_counter() - t0
-        self.times.evaluations += len(q)
+        self._count_evaluations(time.perf_counter() - t0, len(q))
         return out
+
+    def _count_evaluations(self, seconds: float, count: int) -> None:
+        self.times.render_s += seconds
+        self.times.evaluations += count
+
+    def _likelihood(self, observation: PreparedObservation,
+                    renderer: BatchedDepthRenderer | RenderThenScore,
+                    scale: float | None = None) -> Callable[[np.ndarray], np.ndarray]:
+        """The log-likelihood of configurations for ``observation`` (times ``scale``): a
+        :class:`CompiledLikelihood`, whose CPF sweeps run in numba, for the batched
+        renderer; a Python function for any other."""
+        factors = () if scale is None else (scale,)
+        if isinstance(renderer, BatchedDepthRenderer):
+            return CompiledLikelihood(renderer, observation, factors, self._count_evaluations)
+
+        def scored(q):
+            out = self.log_likelihood(q, observation, renderer)
+            return out if scale is None else scale * out
+
+        return scored
 
     def __call__(self, prior: np.ndarray, observation: PreparedObservation,
                  rng: np.random.Generator, jump_probability: np.ndarray | None = None,
@@ -162,11 +184,11 @@ class CpfImageUpdate:
         eval_before = self.times.render_s + self.times.likelihood_s
         result = annealed_coordinate_particle_filter(
             prior[MEAN_A], np.sqrt(np.maximum(prior[VAR_A], 0.0)), self.blocks,
-            num_particles or self.num_particles,
-            lambda q: self.log_likelihood(q, observation), rng,
-            self.max_kl, self.annealing_betas, jump_probability=jump_probability,
+            num_particles or self.num_particles, self._likelihood(observation, self.renderer),
+            rng, self.max_kl, self.annealing_betas, jump_probability=jump_probability,
             jump_std=jump_std,
-            sweep_log_likelihoods=self._sweep_scores(observation) if coarse_sweeps else ())
+            sweep_log_likelihoods=self._sweep_scores(observation) if coarse_sweeps else (),
+            sweep=compiled_sweep)
         total = time.perf_counter() - t0
         self.times.filter_s += total - (self.times.render_s + self.times.likelihood_s
                                         - eval_before)
@@ -188,9 +210,5 @@ class CpfImageUpdate:
                 scores.append(None)
                 continue
             scale = observation.num_valid / coarse.num_valid
-
-            def scored(q, coarse=coarse, scale=scale, renderer=self.sweep_renderers[factor]):
-                return scale * self.log_likelihood(q, coarse, renderer)
-
-            scores.append(scored)
+            scores.append(self._likelihood(coarse, self.sweep_renderers[factor], scale))
         return scores

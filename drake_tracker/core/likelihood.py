@@ -22,6 +22,7 @@ invalid pixels (NaN, <= 0, > Z_max) score 0. A particle's log-likelihood is the 
 import dataclasses
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numba
 import numpy as np
@@ -86,6 +87,12 @@ def valid_pixels(z: np.ndarray, params: LikelihoodParams) -> np.ndarray:
         return np.isfinite(z) & (z > 0) & (z <= params.max_depth_m)
 
 
+#: Columns of :attr:`PreparedObservation.pixel_table`.
+(TABLE_Z, TABLE_INV_SIGMA, TABLE_GAUSS, TABLE_OCC, TABLE_LAM_SIGMA2,
+ TABLE_LOG_P_OCC_INF) = range(6)
+PIXEL_COLUMNS = 8
+
+
 @dataclass
 class PreparedObservation:
     """An observed image reduced to its valid pixels and their per-pixel constants.
@@ -115,6 +122,21 @@ class PreparedObservation:
     def num_valid(self) -> int:
         """P, the number of valid pixels."""
         return len(self.z)
+
+    @cached_property
+    def pixel_table(self) -> np.ndarray:
+        """(P, PIXEL_COLUMNS) float64: each valid pixel's constants in one row (columns
+        TABLE_Z, TABLE_INV_SIGMA, TABLE_GAUSS, TABLE_OCC, TABLE_LAM_SIGMA2,
+        TABLE_LOG_P_OCC_INF; the rest padding, so that a row is one cache line), as the
+        fused kernel reads them; built once per observation (``dataclasses.replace``
+        makes a new observation, with a table of its own)."""
+        table = np.zeros((self.num_valid, PIXEL_COLUMNS))
+        for column, values in ((TABLE_Z, self.z), (TABLE_INV_SIGMA, self.inv_sigma),
+                               (TABLE_GAUSS, self.gauss_coeff), (TABLE_OCC, self.occ_coeff),
+                               (TABLE_LAM_SIGMA2, self.lam_sigma2),
+                               (TABLE_LOG_P_OCC_INF, self.log_p_occ_inf)):
+            table[:, column] = values
+        return table
 
 
 def prepare_observation(depth: np.ndarray, params: LikelihoodParams) -> PreparedObservation:

@@ -179,6 +179,56 @@ def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, 
 
 
 @njit(cache=True)
+def raster_clipped(zbuf: np.ndarray, P: np.ndarray, triangles: np.ndarray, t_begin: int,
+                   t_end: int, fx: float, fy: float, cx: float, cy: float, near: float,
+                   far: float, poly: np.ndarray, rows: np.ndarray, span: np.ndarray) -> None:
+    """Rasterises triangles ``t_begin:t_end`` whose camera-frame vertices are in ``P``
+    (V, 3), clipped against the near plane (Sutherland-Hodgman: 3 or 4 vertices) and
+    without back-face culling: the path of a part that reaches the near plane. ``poly``
+    (4, 3) is scratch; ``rows`` and ``span`` as in :func:`_raster`."""
+    for t in range(t_begin, t_end):
+        ia = triangles[t, 0]
+        ib = triangles[t, 1]
+        ic = triangles[t, 2]
+        za = P[ia, 2]
+        zb = P[ib, 2]
+        zc = P[ic, 2]
+        if za < near and zb < near and zc < near:
+            continue
+        if za > far and zb > far and zc > far:
+            continue
+        if za >= near and zb >= near and zc >= near:
+            _raster_xyz(zbuf, P[ia, 0], P[ia, 1], za, P[ib, 0], P[ib, 1], zb,
+                        P[ic, 0], P[ic, 1], zc, fx, fy, cx, cy, near, far, rows, span)
+            continue
+        # Clip against the near plane z = near (Sutherland-Hodgman): 3 or 4 vertices.
+        m = 0
+        for e in range(3):
+            i0 = triangles[t, e]
+            i1 = triangles[t, (e + 1) % 3]
+            z0 = P[i0, 2]
+            z1 = P[i1, 2]
+            in0 = z0 >= near
+            in1 = z1 >= near
+            if in0:
+                poly[m, 0] = P[i0, 0]
+                poly[m, 1] = P[i0, 1]
+                poly[m, 2] = z0
+                m += 1
+            if in0 != in1:
+                s = (near - z0) / (z1 - z0)
+                poly[m, 0] = P[i0, 0] + s * (P[i1, 0] - P[i0, 0])
+                poly[m, 1] = P[i0, 1] + s * (P[i1, 1] - P[i0, 1])
+                poly[m, 2] = near
+                m += 1
+        for j in range(1, m - 1):
+            _raster_xyz(zbuf, poly[0, 0], poly[0, 1], poly[0, 2],
+                        poly[j, 0], poly[j, 1], poly[j, 2],
+                        poly[j + 1, 0], poly[j + 1, 1], poly[j + 1, 2],
+                        fx, fy, cx, cy, near, far, rows, span)
+
+
+@njit(cache=True)
 def render_particle(zbuf: np.ndarray, X: np.ndarray, vertices: np.ndarray,
                     triangles: np.ndarray, part_body: np.ndarray,
                     part_vertex_start: np.ndarray, part_tri_start: np.ndarray,
@@ -278,46 +328,8 @@ def render_particle(zbuf: np.ndarray, X: np.ndarray, vertices: np.ndarray,
                         SMALL_BOX_PX)
             continue
         # The part reaches the near plane: no back-face culling, clipping per triangle.
-        for t in range(t_begin, t_end):
-            ia = triangles[t, 0]
-            ib = triangles[t, 1]
-            ic = triangles[t, 2]
-            za = P[ia, 2]
-            zb = P[ib, 2]
-            zc = P[ic, 2]
-            if za < near and zb < near and zc < near:
-                continue
-            if za > far and zb > far and zc > far:
-                continue
-            if za >= near and zb >= near and zc >= near:
-                _raster_xyz(zbuf, P[ia, 0], P[ia, 1], za, P[ib, 0], P[ib, 1], zb,
-                            P[ic, 0], P[ic, 1], zc, fx, fy, cx, cy, near, far, rows, span)
-                continue
-            # Clip against the near plane z = near (Sutherland-Hodgman): 3 or 4 vertices.
-            m = 0
-            for e in range(3):
-                i0 = triangles[t, e]
-                i1 = triangles[t, (e + 1) % 3]
-                z0 = P[i0, 2]
-                z1 = P[i1, 2]
-                in0 = z0 >= near
-                in1 = z1 >= near
-                if in0:
-                    poly[m, 0] = P[i0, 0]
-                    poly[m, 1] = P[i0, 1]
-                    poly[m, 2] = z0
-                    m += 1
-                if in0 != in1:
-                    s = (near - z0) / (z1 - z0)
-                    poly[m, 0] = P[i0, 0] + s * (P[i1, 0] - P[i0, 0])
-                    poly[m, 1] = P[i0, 1] + s * (P[i1, 1] - P[i0, 1])
-                    poly[m, 2] = near
-                    m += 1
-            for j in range(1, m - 1):
-                _raster_xyz(zbuf, poly[0, 0], poly[0, 1], poly[0, 2],
-                            poly[j, 0], poly[j, 1], poly[j, 2],
-                            poly[j + 1, 0], poly[j + 1, 1], poly[j + 1, 2],
-                            fx, fy, cx, cy, near, far, rows, span)
+        raster_clipped(zbuf, P, triangles, t_begin, t_end, fx, fy, cx, cy, near, far, poly,
+                       rows, span)
 
 
 @njit(parallel=True, cache=True)

@@ -27,6 +27,7 @@ import numpy as np
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.geometry import DEFAULT_SEGMENTS, RobotMeshes, extract_robot_meshes
 from drake_tracker.core.kinematics import BatchedKinematics
+from drake_tracker.core.lane_render import lane_tables
 from drake_tracker.core.level_of_detail import LevelOfDetail, level_of_detail
 from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.core.mesh_parts import render_tables
@@ -73,6 +74,7 @@ class BatchedDepthRenderer:
             self.meshes = level_of_detail(self.source_meshes, detail.cell_m(intrinsics),
                                           detail.min_reduction)
         self._tables = render_tables(self.meshes, self.kinematics.num_bodies)
+        self._lane_tables = lane_tables(self._tables)
         self._frame_tables = self.kinematics.frame_tables(model.camera_frame)
         self._policy = SerialOrParallel()
         k = intrinsics
@@ -104,7 +106,7 @@ class BatchedDepthRenderer:
             raise ValueError(f"observation has shape {tuple(observation.shape)}, the "
                              f"renderer renders ({k.height}, {k.width})")
         q = self.kinematics.checked_positions(q)
-        return fused_scores(q, self._frame_tables, self._tables, self._planes,
+        return fused_scores(q, self._frame_tables, self._lane_tables, self._planes,
                             (self._fx, self._fy, self._cx, self._cy), self.near_m,
                             self.far_m, observation, self._policy)
 

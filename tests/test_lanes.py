@@ -1,0 +1,133 @@
+"""SIMD across particles (core/lanes.py, lane_render.py, simd_ir.py) against plain
+references: libm's exp, log and erfc, and the scalar rasteriser's images."""
+
+import math
+
+import numpy as np
+import pytest
+from numba import njit, types
+from numba.extending import intrinsic
+
+from drake_tracker.core import simd_ir
+from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.lane_render import lane_scratch, render_lanes
+from drake_tracker.core.lanes import LANES
+from drake_tracker.core.render_batched import BatchedDepthRenderer
+from drake_tracker.core.renderer import default_view_configuration, random_configurations
+from drake_tracker.robot import build_tracker_model, robot_preset
+
+
+def _vector_map(emit):
+    """A numba function out[i:i+4] = emit(x[i:i+4]) over arrays of a multiple of 4."""
+
+    @intrinsic
+    def apply(typingctx, x, out, i):
+        def codegen(context, b, signature, args):
+            x_d = context.make_array(signature.args[0])(context, b, args[0]).data
+            o_d = context.make_array(signature.args[1])(context, b, args[1]).data
+            value = emit(b, [simd_ir.load(b, x_d, args[2])])[0]
+            simd_ir.store(b, value, o_d, args[2])
+            return context.get_dummy_value()
+
+        return types.void(x, out, i), codegen
+
+    @njit
+    def run(x, out):
+        for i in range(0, x.shape[0], simd_ir.WIDTH):
+            apply(x, out, i)
+
+    def call(x):
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        out = np.empty_like(x)
+        run(x, out)
+        return out
+
+    return call
+
+
+def test_vector_exp_log_erfc_against_libm():
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.uniform(-700, 700, 4000), rng.uniform(-5, 5, 4000),
+                        [0.0, -0.0, 1e-300, 700.0, -700.0, 0.5 * math.log(2.0), 1.0, -1.0]])
+    expected = np.array([math.exp(v) for v in x])
+    # relative error below 1e-14 (Taylor to degree 11 on |r| <= ln2/2: 8.8e-15)
+    np.testing.assert_allclose(_vector_map(simd_ir.exp)(x), expected, rtol=1e-14, atol=0)
+    # clamped to [-700, 700]
+    np.testing.assert_allclose(_vector_map(simd_ir.exp)(np.array([-800.0, 800.0] * 2)),
+                               [math.exp(-700), math.exp(700)] * 2, rtol=1e-14)
+    y = np.concatenate([np.exp(rng.uniform(-700, 700, 4000)), rng.uniform(0.5, 2.0, 4000),
+                        [1.0, math.sqrt(0.5), math.sqrt(2.0), 2.0 ** -1022, 1.7e308, 3.0,
+                         0.1, 7.0]])
+    expected = np.array([math.log(v) for v in y])
+    error = np.abs(_vector_map(simd_ir.log)(y) - expected) / np.maximum(1.0, np.abs(expected))
+    assert error.max() < 1e-15  # a few ulps, relative to max(1, |log y|)
+    x = np.concatenate([rng.uniform(-6.0, simd_ir.ERFC_Y_MAX, 8000),
+                        [0.0, -0.0, 1e-9, -1e-9, 9.5, -9.5, 3.0, -3.0]])
+    expected = np.array([math.erfc(v) for v in x])
+    # relative error below 1e-12 (the fit: 3e-13; exp: a few ulps of a small argument)
+    np.testing.assert_allclose(_vector_map(simd_ir.erfc)(x), expected, rtol=1e-12, atol=0)
+    # beyond ERFC_Y_MAX: below 1e-40, and 2 for the mirror image
+    far = _vector_map(simd_ir.erfc)(np.array([10.0, 30.0, -10.0, -30.0]))
+    assert np.all(far[:2] < 1e-40) and np.all(far[:2] >= 0) and np.all(far[2:] == 2.0)
+
+
+def test_erfcx_fit_is_accurate():
+    c = simd_ir.erfcx_fit()
+    y = np.linspace(0.0, simd_ir.ERFC_Y_MAX, 20001)
+    t = 1.0 / (1.0 + 0.5 * y)
+    t_lo = 1.0 / (1.0 + 0.5 * simd_ir.ERFC_Y_MAX)
+    s = (t - t_lo) * 2.0 / (1.0 - t_lo) - 1.0
+    expected = np.array([math.exp(v * v) * math.erfc(v) for v in y])
+    assert np.max(np.abs(np.polynomial.polynomial.polyval(s, c) / expected - 1)) < 1e-12
+
+
+@njit
+def _lane_images(poses, tables, planes, fx, fy, cx, cy, near, far, height, width, out):
+    """Depth images (LANES, H, W) of a batch, from the lanes' z-buffer."""
+    (vertices, triangles, part_body, part_vertex_start, part_tri_start, centers, radii,
+     tri_planes, closed) = tables
+    zb = np.zeros(height * width * LANES + LANES)
+    rows = np.array([height, -1])
+    span = np.empty((height, 2), np.int64)
+    span[:, 0] = width
+    span[:, 1] = -1
+    render_lanes(zb, height, width, poses, vertices, triangles, part_body, part_vertex_start,
+                 part_tri_start, centers, radii, tri_planes, closed, planes, fx, fy, cx, cy,
+                 near, far, lane_scratch(vertices.shape[0]), rows, span)
+    covered = True  # every pixel drawn lies in its row's span
+    for r in range(height):
+        for c in range(width):
+            for lane in range(LANES):
+                iz = zb[(r * width + c) * LANES + lane]
+                out[lane, r, c] = np.float32(1.0 / iz) if iz > 0.0 else np.float32(np.inf)
+                if iz > 0.0 and not (span[r, 0] <= c and c <= span[r, 1]):
+                    covered = False
+    return covered
+
+
+@pytest.mark.parametrize("robot, spread", [("apollo", 0.02), ("apollo", 0.6), ("arm6", 0.3)])
+def test_lane_images_equal_the_scalar_rasteriser(robot, spread):
+    """Each lane of a batch gets exactly the image the scalar rasteriser renders for its
+    particle, for particles as alike as a CPF block's (0.02 rad) and far apart."""
+    model = build_tracker_model(robot_preset(robot))
+    renderer = BatchedDepthRenderer(model, CameraIntrinsics.from_fov(640, 480, np.radians(45))
+                                    .subsampled(8))
+    q = random_configurations(model, 4 * LANES, seed=3, spread_rad=spread,
+                              center=default_view_configuration(model))
+    expected = renderer.render(q)
+    X = renderer.kinematics.relative_poses(q, model.camera_frame)
+    k = renderer.intrinsics
+    drawn = 0
+    for first in range(0, len(q), LANES):
+        poses = np.ascontiguousarray(X[first:first + LANES, :, :3, :].reshape(
+            LANES, X.shape[1], 12).transpose(1, 2, 0))
+        got = np.empty((LANES, k.height, k.width), np.float32)
+        assert _lane_images(poses, renderer._lane_tables, renderer._planes, renderer._fx,
+                     renderer._fy, renderer._cx, renderer._cy, renderer.near_m,
+                     renderer.far_m, k.height, k.width, got)
+        want = expected[first:first + LANES]
+        # the same robot pixels, at the same float32 depths
+        np.testing.assert_array_equal(np.isfinite(got), np.isfinite(want))
+        np.testing.assert_array_equal(got, want)
+        drawn += np.isfinite(want).sum()
+    assert drawn > 100 * len(q)  # the robot is in view
