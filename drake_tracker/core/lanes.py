@@ -223,13 +223,13 @@ def _run(b, halves, fr):
     1e-6 px (so that no column an edge test accepts is left out): (first, last) as
     doubles, first > last when no lane reaches the row."""
     run_lo = run_hi = None
-    for c, row_ok, bounds in halves:
+    for c, reached, bounds in halves:
         lo, hi = c[CLO], c[CHI]
         for lo_s, lo_t, hi_s, hi_t in bounds:
             lo = v.vmax(b, lo, b.fadd(b.fmul(lo_s, fr), lo_t))
             hi = v.vmin(b, hi, b.fadd(b.fmul(hi_s, fr), hi_t))
-        lo = b.select(row_ok, lo, v.const(math.inf))
-        hi = b.select(row_ok, hi, v.const(-math.inf))
+        lo = b.select(reached, lo, v.const(math.inf))
+        hi = b.select(reached, hi, v.const(-math.inf))
         run_lo = lo if run_lo is None else v.vmin(b, run_lo, lo)
         run_hi = hi if run_hi is None else v.vmax(b, run_hi, hi)
     first = _scalar(b, lambda b, x: v.vceil(b, b.fsub(x, v.const(1e-6))),
@@ -241,17 +241,22 @@ def _run(b, halves, fr):
 
 def _emit_rows(b, z_d, s_d, halves, width, r0, r1, box_lo, box_hi, runs, check_range):
     """The row and column loops of :func:`lane_raster` (``runs``, ``check_range``:
-    whether to narrow rows to their runs, and to test the depth range)."""
+    whether to narrow rows to their runs, and to test the depth range). A pixel is
+    inside where the least of its tests' margins (edge functions, distances to the
+    box and depth bounds) is >= 0: one compare, the same outcome as testing each (the
+    margins are exact in sign: no NaN reaches them, and fl(a - b) has the sign of a - b)."""
     zero = v.const(0.0)
     bounds = [_run_bounds(b, c) for c in halves] if runs else [None] * len(halves)
     with cgutils.for_range(b, b.add(r1, ir.Constant(I64, 1)), start=r0) as row:
         fr = v.splat(b, b.sitofp(row.index, F64))
         per_half = []
         for c in halves:
-            row_ok = b.and_(b.fcmp_ordered(">=", fr, c[RLO]), b.fcmp_ordered("<=", fr, c[RHI]))
+            reached = b.and_(b.fcmp_ordered(">=", fr, c[RLO]), b.fcmp_ordered("<=", fr, c[RHI]))
             hk = [b.fadd(b.fmul(c[bk], fr), c[gk]) for bk, gk in ((B0, G0), (B1, G1),
                                                                   (B2, G2))]
-            per_half.append((c, row_ok, hk, b.fadd(b.fmul(c[BI], fr), c[KI])))
+            # a lane whose triangle does not reach this row fails its first edge
+            hk[0] = b.select(reached, hk[0], v.const(-math.inf))
+            per_half.append((c, reached, hk, b.fadd(b.fmul(c[BI], fr), c[KI])))
         lo_f, hi_f = box_lo, box_hi
         if runs:
             lo, hi = _run(b, [(c, ok, bd) for (c, ok, _, _), bd in zip(per_half, bounds)], fr)
@@ -268,18 +273,17 @@ def _emit_rows(b, z_d, s_d, halves, width, r0, r1, box_lo, box_hi, runs, check_r
             with cgutils.for_range(b, b.add(hi_i, ir.Constant(I64, 1)), start=lo_i) as column:
                 fc = v.splat(b, b.sitofp(column.index, F64))
                 offset = b.mul(b.add(row_base, column.index), ir.Constant(I64, LANES))
-                for h, (c, row_ok, hk, ei) in enumerate(per_half):
-                    inside = b.and_(row_ok, b.and_(b.fcmp_ordered(">=", fc, c[CLO]),
-                                                   b.fcmp_ordered("<=", fc, c[CHI])))
+                for h, (c, _, hk, ei) in enumerate(per_half):
+                    margin = v.vmin(b, b.fsub(fc, c[CLO]), b.fsub(c[CHI], fc))
                     for a, hh in zip((A0, A1, A2), hk):
-                        inside = b.and_(inside, b.fcmp_ordered(
-                            ">=", b.fadd(b.fmul(c[a], fc), hh), zero))
+                        margin = v.vmin(b, margin, b.fadd(b.fmul(c[a], fc), hh))
                     iz = b.fadd(b.fmul(c[AI], fc), ei)
                     if check_range:
-                        inside = b.and_(inside, b.and_(b.fcmp_ordered("<=", iz, c[IZHI]),
-                                                       b.fcmp_ordered(">=", iz, c[IZLO])))
+                        margin = v.vmin(b, margin, v.vmin(b, b.fsub(c[IZHI], iz),
+                                                          b.fsub(iz, c[IZLO])))
+                    inside = b.fcmp_ordered(">=", margin, zero)
                     at = v.add_offset(b, offset, h * WIDTH)
-                    v.store(b, v.vmax(b, v.load(b, z_d, at), b.select(inside, iz, zero)),
+                    v.store(b, v.zmax(b, v.load(b, z_d, at), b.select(inside, iz, zero)),
                             z_d, at)
 
 

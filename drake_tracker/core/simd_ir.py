@@ -108,6 +108,26 @@ def vmax(b: ir.IRBuilder, x: ir.Value, y: ir.Value) -> ir.Value:
     return b.select(b.fcmp_ordered(">", x, y), x, y)
 
 
+def test(b: ir.IRBuilder, op: str, x: ir.Value, y: ir.Value) -> ir.Value:
+    """The lanes where ``x op y`` holds (ordered compare) as an int64 mask (all ones or
+    zero): masks combined with ``and_`` stay in vector registers, where <4 x i1>
+    masks are packed and unpacked on x86."""
+    return b.sext(b.fcmp_ordered(op, x, y), IVEC)
+
+
+def keep(b: ir.IRBuilder, x: ir.Value, mask: ir.Value) -> ir.Value:
+    """x where ``mask`` (from :func:`test`) holds, +0.0 elsewhere."""
+    return b.bitcast(b.and_(b.bitcast(x, IVEC), mask), VEC)
+
+
+def zmax(b: ir.IRBuilder, x: ir.Value, y: ir.Value) -> ir.Value:
+    """max(x, y) of values that are not NaN (one instruction where the target has it;
+    unlike a compare-and-select of a loaded value, never turned into a masked store)."""
+    fn = cgutils.get_or_insert_function(
+        b.module, ir.FunctionType(VEC, [VEC, VEC]), f"llvm.maxnum.v{WIDTH}f64")
+    return b.call(fn, [x, y], fastmath=("nnan",))
+
+
 def vabs(b: ir.IRBuilder, x: ir.Value) -> ir.Value:
     """Lane-wise |x|."""
     return _llvm(b, "fabs", x)
