@@ -131,3 +131,29 @@ def test_lane_images_equal_the_scalar_rasteriser(robot, spread):
         np.testing.assert_array_equal(got, want)
         drawn += np.isfinite(want).sum()
     assert drawn > 100 * len(q)  # the robot is in view
+
+
+@pytest.mark.parametrize("robot", ["apollo", "arm6"])
+def test_lane_forward_kinematics_is_the_scalar_one_bit_for_bit(robot):
+    """lane_relative_poses against BatchedKinematics.relative_poses (kinematics.py's
+    relative_poses_one per particle), a full batch and a short one (lanes past the
+    count repeat the last configuration)."""
+    from drake_tracker.core.kinematics import BatchedKinematics
+    from drake_tracker.core.lane_kinematics import lane_relative_poses
+
+    model = build_tracker_model(robot_preset(robot))
+    kinematics = BatchedKinematics.from_plant(model.plant)
+    q = random_configurations(model, LANES + 5, seed=1, spread_rad=0.5,
+                              center=default_view_configuration(model))
+    expected = kinematics.relative_poses(q, model.camera_frame)
+    nb = kinematics.num_bodies
+    world, work = np.zeros(nb * 12 * LANES), np.zeros(3 * 12 * LANES)
+    for first in (0, LANES):
+        count = min(LANES, len(q) - first)
+        poses = np.zeros((nb, 12, LANES))
+        lane_relative_poses(q, first, count, *kinematics.frame_tables(model.camera_frame),
+                            world, poses, work)
+        for lane in range(LANES):
+            n = first + min(lane, count - 1)
+            np.testing.assert_array_equal(poses[:, :, lane].reshape(nb, 3, 4),
+                                          expected[n, :, :3, :])

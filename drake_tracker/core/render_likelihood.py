@@ -6,7 +6,7 @@ likelihood evaluations.
 :func:`~drake_tracker.core.rasterize.render_kernel` would render (to about 1e-13
 relative, tested), without writing the (N, H, W) images to memory. The particles go
 through in batches of :data:`~drake_tracker.core.lanes.LANES`: forward kinematics per
-particle, then one pass of :func:`~drake_tracker.core.lane_render.render_lanes` and
+particle (8 at a time), then one pass of :func:`~drake_tracker.core.lane_render.render_lanes` and
 :func:`~drake_tracker.core.lane_render.score_pixels` for the whole batch (SIMD across
 the batch's particles: they are nearly the same configuration, so they share the
 triangles and pixels to visit).
@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from drake_tracker.core.kinematics import relative_poses_one
+from drake_tracker.core.lane_kinematics import lane_relative_poses
 from drake_tracker.core.lane_likelihood import PIXELS_PER_CALL
 from drake_tracker.core.lane_render import lane_scratch, render_lanes, score_pixels
 from drake_tracker.core.lanes import LANES
@@ -35,16 +35,16 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
                      lam, occlusion, truncation, out):
     """FK, rendering and scoring of each configuration q[n] into out[n], in ``chunks``
     contiguous chunks of LANES-particle batches (prange: parallel in the parallel
-    compilation). A batch short of LANES particles repeats its last one."""
+    compilation). A batch short of LANES particles repeats its last one. Forward
+    kinematics is :func:`~drake_tracker.core.lane_kinematics.lane_relative_poses`, the
+    poses of :func:`~drake_tracker.core.kinematics.relative_poses_one` bit for bit."""
     N = q.shape[0]
     nb = kind.shape[0] + 1  # one joint step per body but the world (all are connected)
     batches = (N + LANES - 1) // LANES
     for chunk in prange(chunks):
-        X = np.empty((nb, 4, 4))
-        Y = np.empty((nb, 4, 4))
+        world = np.empty(nb * 12 * LANES)
+        work = np.empty(3 * 12 * LANES)
         poses = np.empty((nb, 12, LANES))
-        T = np.empty((4, 4))
-        M = np.empty((4, 4))
         scratch = lane_scratch(vertices.shape[0])
         zb = np.zeros(height * width * LANES + LANES)  # LANES zeros past the image
         offsets = np.empty(height * width + PIXELS_PER_CALL, np.int64)
@@ -56,12 +56,9 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
         acc = np.zeros(LANES)
         for batch in range(chunk * batches // chunks, (chunk + 1) * batches // chunks):
             first = batch * LANES
-            for lane in range(LANES):
-                relative_poses_one(min(first + lane, N - 1), q, kind, inboard, outboard,
-                                   q_index, axis, A, B, rev, frame_body, X_BF, X, Y, T, M)
-                for b in range(nb):
-                    for k in range(12):
-                        poses[b, k, lane] = Y[b, k // 4, k % 4]
+            lane_relative_poses(q, first, min(LANES, N - first), kind, inboard, outboard,
+                                q_index, axis, A, B, rev, frame_body, X_BF, world, poses,
+                                work)
             rows[0] = height
             rows[1] = -1
             render_lanes(zb, height, width, poses, vertices, triangles, part_body,
