@@ -11,7 +11,8 @@ gets exactly its own image), into a z-buffer whose pixel holds the lanes side by
 The arithmetic is that of the scalar rasteriser (:mod:`drake_tracker.core.rasterize`'s
 box path), so the images are the same, and the scores agree with
 ``likelihood.log_likelihoods`` of ``render_kernel``'s images to about 1e-13 relative
-(tested). Parts that reach the near plane are clipped lane by lane by the scalar path.
+(tested). Of a part that reaches the near plane, the triangles that do are clipped
+lane by lane by the scalar path.
 """
 
 from __future__ import annotations
@@ -49,12 +50,14 @@ def lane_tables(render_tables: tuple) -> tuple:
 def lane_scratch(num_vertices: int) -> tuple:
     """Scratch arrays of :func:`render_lanes` for meshes of ``num_vertices`` vertices:
     projected vertices (3 x V*LANES), camera-frame vertices of one lane (V, 3), a
-    clipped polygon (4, 3), a triangle's coefficients, a box, the lanes in view and the
-    camera's origin in the body frame."""
+    clipped polygon (4, 3), a triangle's coefficients, a box, the lanes' states for a
+    part and for a triangle, the camera's origin in the body frame, and the lanes where
+    the part reaches the near plane."""
     return (np.empty(num_vertices * LANES), np.empty(num_vertices * LANES),
-            np.empty(num_vertices * LANES), np.empty((num_vertices, 3)), np.empty((4, 3)),
-            np.zeros(COEFF_ROWS * LANES), np.zeros(6, np.int64), np.zeros(LANES),
-            np.zeros(3 * LANES))
+            np.empty(num_vertices * LANES), np.empty(num_vertices * LANES),
+            np.empty((num_vertices, 3)), np.empty((4, 3)), np.zeros(COEFF_ROWS * LANES),
+            np.zeros(6, np.int64), np.zeros(LANES), np.zeros(LANES), np.zeros(3 * LANES),
+            np.zeros(LANES, np.bool_))
 
 
 @njit(cache=True)
@@ -71,7 +74,7 @@ def render_lanes(zb: np.ndarray, height: int, width: int, poses: np.ndarray,
     :func:`~drake_tracker.core.rasterize.render_particle`; ``tri_planes`` (T, 4) are
     the triangles' normals and offsets. ``rows``/``span`` grow to the pixels touched.
     ``scratch``: from :func:`lane_scratch`."""
-    U, Vv, IZ, P, poly, co, box, fast, origin = scratch
+    U, Vv, IZ, Z, P, poly, co, box, fast, triangle_fast, origin, near_lane = scratch
     flat = poses.reshape(-1)
     w1 = width - 1.0
     h1 = height - 1.0
@@ -87,7 +90,8 @@ def render_lanes(zb: np.ndarray, height: int, width: int, poses: np.ndarray,
         v_end = part_vertex_start[part + 1]
         if t_begin == t_end:
             continue
-        any_fast = False
+        any_seen = False
+        any_near = False
         sx = sphere_center[part, 0]
         sy = sphere_center[part, 1]
         sz = sphere_center[part, 2]
@@ -103,26 +107,27 @@ def render_lanes(zb: np.ndarray, height: int, width: int, poses: np.ndarray,
                                      + planes[k, 2] * czb < -rad)
             in_front = seen and czb - rad >= near
             fast[lane] = 1.0 if in_front else 0.0
-            any_fast = any_fast or in_front
+            near_lane[lane] = seen and not in_front
+            any_seen = any_seen or seen
+            any_near = any_near or near_lane[lane]
             for j in range(3):  # the camera origin in the body frame: -R^T p
                 origin[j * LANES + lane] = -(X[j] * X[3] + X[4 + j] * X[7]
                                              + X[8 + j] * X[11])
-            if seen and not in_front:  # reaches the near plane: clip, lane by lane
-                for i in range(v_begin, v_end):
-                    for j in range(3):
-                        P[i, j] = (X[4 * j] * vertices[i, 0] + X[4 * j + 1] * vertices[i, 1]
-                                   + X[4 * j + 2] * vertices[i, 2] + X[4 * j + 3])
-                raster_clipped(zb3[:, :, lane], P, triangles, t_begin, t_end, fx, fy, cx, cy,
-                               near, far, poly, rows, span)
-        if not any_fast:
+        if not any_seen:
             continue
         for i in range(v_begin, v_end):
-            lane_project(U, Vv, IZ, i, flat, b, vertices[i, 0], vertices[i, 1],
+            lane_project(U, Vv, IZ, Z, i, flat, b, vertices[i, 0], vertices[i, 1],
                          vertices[i, 2], fx, fy, cx, cy)
+        lanes_of_triangle = fast
         for t in range(t_begin, t_end):
+            if any_near:  # the part reaches the near plane in some lanes
+                _near_lanes(t, triangles, vertices, poses, b, Z, near_lane, fast,
+                            triangle_fast, P, poly, zb3, fx, fy, cx, cy, near, far, rows,
+                            span)
+                lanes_of_triangle = triangle_fast
             drawn = lane_triangle(co, box, U, Vv, IZ, triangles[t, 0], triangles[t, 1],
                                   triangles[t, 2], tri_planes, t, tri_closed[t], origin,
-                                  fast, w1, h1, iz_lo, iz_hi)
+                                  lanes_of_triangle, w1, h1, iz_lo, iz_hi)
             if drawn == 0:
                 continue
             r0 = box[0]
@@ -133,6 +138,33 @@ def render_lanes(zb: np.ndarray, height: int, width: int, poses: np.ndarray,
             rows[1] = max(rows[1], r1)
             lane_raster(zb, width, co, r0, r1, c0, c1, (r1 - r0 + 1) * (c1 - c0 + 1) > BOX_PX,
                         span)
+
+
+@njit(cache=True)
+def _near_lanes(t, triangles, vertices, poses, b, Z, near_lane, fast, triangle_fast, P,
+                poly, zb3, fx, fy, cx, cy, near, far, rows, span):
+    """For a part that reaches the near plane in some lanes (where render_particle
+    neither culls back faces nor skips clipping): triangle t's lane states, 2 (drawn
+    without culling by the lanes) in those lanes where all three of its vertices are in
+    front of the near plane; in the others it is clipped and drawn by the scalar path."""
+    for lane in range(LANES):
+        triangle_fast[lane] = fast[lane]
+        if not near_lane[lane]:
+            continue
+        ia = triangles[t, 0]
+        ib = triangles[t, 1]
+        ic = triangles[t, 2]
+        if (Z[ia * LANES + lane] >= near and Z[ib * LANES + lane] >= near
+                and Z[ic * LANES + lane] >= near):
+            triangle_fast[lane] = 2.0
+            continue
+        X = poses[b, :, lane]
+        for i in (ia, ib, ic):
+            for j in range(3):
+                P[i, j] = (X[4 * j] * vertices[i, 0] + X[4 * j + 1] * vertices[i, 1]
+                           + X[4 * j + 2] * vertices[i, 2] + X[4 * j + 3])
+        raster_clipped(zb3[:, :, lane], P, triangles, t, t + 1, fx, fy, cx, cy, near, far,
+                       poly, rows, span)
 
 
 @njit(cache=True)

@@ -55,20 +55,20 @@ def _row(k: int, h: int) -> int:
 
 @intrinsic
 def lane_project(typingctx: object, U: types.Type, Vv: types.Type, IZ: types.Type,
-                 i: types.Type, poses: types.Type, body: types.Type, px: types.Type,
-                 py: types.Type, pz: types.Type, fx: types.Type, fy: types.Type,
-                 cx: types.Type, cy: types.Type) -> tuple:
+                 Z: types.Type, i: types.Type, poses: types.Type, body: types.Type,
+                 px: types.Type, py: types.Type, pz: types.Type, fx: types.Type,
+                 fy: types.Type, cx: types.Type, cy: types.Type) -> tuple:
     """Vertex i (body-frame px, py, pz of body ``body``) projected for each lane:
-    U/Vv = fx x / z + cx, fy y / z + cy and IZ = 1/z at row i."""
-    sig = types.void(U, Vv, IZ, i, poses, body, px, py, pz, fx, fy, cx, cy)
+    U/Vv = fx x / z + cx, fy y / z + cy, IZ = 1/z and Z = z at row i."""
+    sig = types.void(U, Vv, IZ, Z, i, poses, body, px, py, pz, fx, fy, cx, cy)
 
     def codegen(context, b, signature, args):
-        u_d, v_d, iz_d, p_d = (_data(context, b, signature.args[k], args[k])
-                               for k in (0, 1, 2, 4))
-        point = [v.splat(b, args[k]) for k in (6, 7, 8)]
-        fx, fy, cx, cy = (v.splat(b, args[k]) for k in (9, 10, 11, 12))
-        base = b.mul(args[5], ir.Constant(I64, 12 * LANES))
-        out = b.mul(args[3], ir.Constant(I64, LANES))
+        u_d, v_d, iz_d, z_d, p_d = (_data(context, b, signature.args[k], args[k])
+                                    for k in (0, 1, 2, 3, 5))
+        point = [v.splat(b, args[k]) for k in (7, 8, 9)]
+        fx, fy, cx, cy = (v.splat(b, args[k]) for k in (10, 11, 12, 13))
+        base = b.mul(args[6], ir.Constant(I64, 12 * LANES))
+        out = b.mul(args[4], ir.Constant(I64, LANES))
         for h in range(_HALVES):
             xyz = []
             for row in range(3):
@@ -81,6 +81,7 @@ def lane_project(typingctx: object, U: types.Type, Vv: types.Type, IZ: types.Typ
             v.store(b, b.fadd(b.fmul(b.fmul(fx, xyz[0]), iz), cx), u_d, offset)
             v.store(b, b.fadd(b.fmul(b.fmul(fy, xyz[1]), iz), cy), v_d, offset)
             v.store(b, iz, iz_d, offset)
+            v.store(b, xyz[2], z_d, offset)
         return context.get_dummy_value()
 
     return sig, codegen
@@ -131,8 +132,9 @@ def lane_triangle(typingctx: object, co: types.Type, box: types.Type, U: types.T
                   iz_lo: types.Type, iz_hi: types.Type) -> tuple:
     """Culls and sets up triangle t (vertex rows ia, ib, ic; ``planes`` (T, 4): n and
     offset, facing the camera where n . origin > offset, for a closed surface) for
-    every lane where ``fast`` (LANES doubles, nonzero: the part is in view and in front
-    of the near plane) holds, ``iz_lo``/``iz_hi`` the inverse depths of the far and
+    every lane where ``fast`` (LANES doubles) is nonzero: 1 with back-face culling (the
+    part is in front of the near plane), 2 without (the part reaches it, this triangle
+    does not), ``iz_lo``/``iz_hi`` the inverse depths of the far and
     (with the rasteriser's slack) the near plane. Returns the lanes that draw it as
     bits; writes their coefficients into ``co`` and the union of their boxes (r0, r1,
     c0, c1) into ``box[:4]``. ``origin``: (3, LANES) the camera's origin in the body
@@ -160,12 +162,14 @@ def lane_triangle(typingctx: object, co: types.Type, box: types.Type, U: types.T
             o = [v.load(b, o_d, _row(k, h)) for k in range(3)]
             facing = b.fadd(b.fadd(b.fmul(nrm[0], o[0]), b.fmul(nrm[1], o[1])),
                             b.fmul(nrm[2], o[2]))
-            front = b.or_(b.fcmp_ordered(">", facing, nrm[3]), open_surface)
+            state = v.load(b, fast_d, h * WIDTH)
+            front = b.or_(b.or_(b.fcmp_ordered(">", facing, nrm[3]), open_surface),
+                          b.fcmp_ordered("==", state, v.const(2.0)))
             c0 = v.vmax(b, zero, v.vceil(b, v.vmin(b, uu[0], v.vmin(b, uu[1], uu[2]))))
             c1 = v.vmin(b, w1, v.vfloor(b, v.vmax(b, uu[0], v.vmax(b, uu[1], uu[2]))))
             r0 = v.vmax(b, zero, v.vceil(b, v.vmin(b, vv[0], v.vmin(b, vv[1], vv[2]))))
             r1 = v.vmin(b, h1, v.vfloor(b, v.vmax(b, vv[0], v.vmax(b, vv[1], vv[2]))))
-            on = b.fcmp_ordered("!=", v.load(b, fast_d, h * WIDTH), zero)
+            on = b.fcmp_ordered("!=", state, zero)
             ok = b.and_(b.and_(on, front), b.and_(b.fcmp_ordered("<=", c0, c1),
                                                   b.fcmp_ordered("<=", r0, r1)))
             masks.append(ok)
