@@ -71,9 +71,9 @@ class CompiledLikelihood:
             self.on_evaluation(time.perf_counter() - t0, len(q))
         return out
 
-    def kernel_arguments(self) -> tuple[tuple, tuple]:
+    def kernel_arguments(self, num_particles: int) -> tuple[tuple, tuple]:
         """The scoring kernel's arguments between q and chunks, and between chunks and
-        out (``render_likelihood._score_particles``)."""
+        out (``render_likelihood._score_particles``), for ``num_particles`` at a time."""
         r, o = self.renderer, self.observation
         k = r.intrinsics
         if tuple(o.shape) != (k.height, k.width):
@@ -82,7 +82,8 @@ class CompiledLikelihood:
         return ((*r._frame_tables, *r._lane_tables, r._planes, r._fx, r._fy, r._cx, r._cy,
                  r.near_m, r.far_m),
                 (k.height, k.width, o.pixel_slot, o.pixel_table, o.uniform,
-                 o.occluder_rate_per_m, o.occlusion_probability, o.truncation))
+                 o.occluder_rate_per_m, o.occlusion_probability, o.truncation,
+                 r.workspace(num_batch_chunks(num_particles))))
 
 
 def mixture_terms(mixture: CoordinateMixture) -> np.ndarray:
@@ -197,7 +198,7 @@ def compiled_sweep(prior_mean: np.ndarray, prior_std: np.ndarray,
                                           log_likelihood, rng, max_kl, prior, proposal)
     prior_mean, prior_std, prior, proposal, importance = checked_sweep(
         prior_mean, prior_std, num_particles, prior, proposal)
-    head, tail = log_likelihood.kernel_arguments()
+    head, tail = log_likelihood.kernel_arguments(num_particles)
     blocks = [np.asarray(block, np.int64).reshape(-1) for block in blocks]
     block_start = np.cumsum([0] + [len(block) for block in blocks]).astype(np.int64)
     block_index = np.concatenate(blocks) if blocks else np.zeros(0, np.int64)

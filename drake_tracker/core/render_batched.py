@@ -33,7 +33,11 @@ from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.core.mesh_parts import render_tables
 from drake_tracker.core.numba_threading import SerialOrParallel
 from drake_tracker.core.rasterize import frustum_planes, num_chunks, render_kernel
-from drake_tracker.core.render_likelihood import fused_scores
+from drake_tracker.core.render_likelihood import (
+    fused_scores,
+    kernel_workspace,
+    num_batch_chunks,
+)
 
 if TYPE_CHECKING:
     from drake_tracker.robot import TrackerModel
@@ -77,6 +81,7 @@ class BatchedDepthRenderer:
         self._lane_tables = lane_tables(self._tables)
         self._frame_tables = self.kinematics.frame_tables(model.camera_frame)
         self._policy = SerialOrParallel()
+        self._workspace: tuple | None = None
         k = intrinsics
         self._fx = float(k.fx)
         self._fy = float(k.fy)
@@ -84,6 +89,19 @@ class BatchedDepthRenderer:
         self._cy = float(k.cy) - self.pixel_center_offset
         self._planes = frustum_planes(self._fx, self._fy, self._cx, self._cy,
                                        k.width, k.height)
+
+    def workspace(self, chunks: int) -> tuple:
+        """The scoring kernel's scratch (``render_likelihood.kernel_workspace``) for at
+        least ``chunks`` chunks, made once (for as many chunks as numba may run threads
+        in parallel) and kept: a kernel call does not allocate or clear its z-buffers."""
+        if self._workspace is None or self._workspace[0].shape[0] < chunks:
+            import numba
+
+            k = self.intrinsics
+            self._workspace = kernel_workspace(
+                max(chunks, 2 * numba.config.NUMBA_NUM_THREADS), self.kinematics.num_bodies,
+                self._lane_tables[0].shape[0], k.height, k.width)
+        return self._workspace
 
     @property
     def num_triangles(self) -> int:
@@ -108,7 +126,8 @@ class BatchedDepthRenderer:
         q = self.kinematics.checked_positions(q)
         return fused_scores(q, self._frame_tables, self._lane_tables, self._planes,
                             (self._fx, self._fy, self._cx, self._cy), self.near_m,
-                            self.far_m, observation, self._policy)
+                            self.far_m, observation, self._policy,
+                            self.workspace(num_batch_chunks(len(q))))
 
     def render_camera_poses(self, X_CB: np.ndarray) -> np.ndarray:
         """Renders from body poses in the camera frame, (N, num_bodies, 4, 4)."""

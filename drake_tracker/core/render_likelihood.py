@@ -28,32 +28,52 @@ from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.core.numba_threading import SerialOrParallel, serial_and_parallel
 
 
+def kernel_workspace(chunks: int, num_bodies: int, num_vertices: int, height: int,
+                     width: int) -> tuple:
+    """Scratch of the scoring kernel for ``chunks`` chunks, made once and kept between
+    calls: each chunk's z-buffer (H*W*LANES inverse depths and LANES zeros past them)
+    is all zeros and its spans empty between calls (the kernel clears what it drew)."""
+    zb = np.zeros((chunks, height * width * LANES + LANES))
+    span = np.empty((chunks, height, 2), dtype=np.int64)
+    span[:, :, 0] = width
+    span[:, :, 1] = -1
+    lanes = [lane_scratch(num_vertices) for _ in range(chunks)]
+    stacked = tuple(np.stack([scratch[k] for scratch in lanes]) for k in range(len(lanes[0])))
+    return (zb, span, np.empty((chunks, num_bodies * 12 * LANES)),
+            np.empty((chunks, 3 * 12 * LANES)), np.empty((chunks, num_bodies, 12, LANES)),
+            np.empty((chunks, height * width + PIXELS_PER_CALL), np.int64),
+            np.empty((chunks, height * width + PIXELS_PER_CALL), np.int64),
+            np.empty((chunks, 2), np.int64), np.zeros((chunks, LANES)), stacked)
+
+
 def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame_body, X_BF,
                      vertices, triangles, part_body, part_vertex_start, part_tri_start,
                      sphere_center, sphere_radius, tri_planes, tri_closed, planes, fx, fy,
                      cx, cy, near, far, chunks, height, width, pixel_slot, table, uniform,
-                     lam, occlusion, truncation, out):
+                     lam, occlusion, truncation, workspace, out):
     """FK, rendering and scoring of each configuration q[n] into out[n], in ``chunks``
     contiguous chunks of LANES-particle batches (prange: parallel in the parallel
-    compilation). A batch short of LANES particles repeats its last one. Forward
-    kinematics is :func:`~drake_tracker.core.lane_kinematics.lane_relative_poses`, the
-    poses of :func:`~drake_tracker.core.kinematics.relative_poses_one` bit for bit."""
+    compilation), each with its scratch from ``workspace`` (:func:`kernel_workspace`).
+    A batch short of LANES particles repeats its last one. Forward kinematics is
+    :func:`~drake_tracker.core.lane_kinematics.lane_relative_poses`, the poses of
+    :func:`~drake_tracker.core.kinematics.relative_poses_one` bit for bit."""
     N = q.shape[0]
-    nb = kind.shape[0] + 1  # one joint step per body but the world (all are connected)
     batches = (N + LANES - 1) // LANES
+    zbs, spans, worlds, works, all_poses, all_offsets, all_pixels, all_rows, accs, lanes = (
+        workspace)
     for chunk in prange(chunks):
-        world = np.empty(nb * 12 * LANES)
-        work = np.empty(3 * 12 * LANES)
-        poses = np.empty((nb, 12, LANES))
-        scratch = lane_scratch(vertices.shape[0])
-        zb = np.zeros(height * width * LANES + LANES)  # LANES zeros past the image
-        offsets = np.empty(height * width + PIXELS_PER_CALL, np.int64)
-        pixels = np.empty(height * width + PIXELS_PER_CALL, np.int64)
-        rows = np.empty(2, dtype=np.int64)
-        span = np.empty((height, 2), dtype=np.int64)
-        span[:, 0] = width
-        span[:, 1] = -1
-        acc = np.zeros(LANES)
+        zb = zbs[chunk]
+        span = spans[chunk]
+        world = worlds[chunk]
+        work = works[chunk]
+        poses = all_poses[chunk]
+        offsets = all_offsets[chunk]
+        pixels = all_pixels[chunk]
+        rows = all_rows[chunk]
+        acc = accs[chunk]
+        scratch = (lanes[0][chunk], lanes[1][chunk], lanes[2][chunk], lanes[3][chunk],
+                   lanes[4][chunk], lanes[5][chunk], lanes[6][chunk], lanes[7][chunk],
+                   lanes[8][chunk], lanes[9][chunk], lanes[10][chunk], lanes[11][chunk])
         for batch in range(chunk * batches // chunks, (chunk + 1) * batches // chunks):
             first = batch * LANES
             lane_relative_poses(q, first, min(LANES, N - first), kind, inboard, outboard,
@@ -87,14 +107,17 @@ def num_batch_chunks(n: int) -> int:
 def fused_scores(q: np.ndarray, frame_tables: tuple, lane_tables: tuple,
                  frustum_planes: np.ndarray, projection: tuple[float, float, float, float],
                  near_m: float, far_m: float, observation: PreparedObservation,
-                 policy: SerialOrParallel | None = None) -> np.ndarray:
+                 policy: SerialOrParallel | None = None,
+                 workspace: tuple | None = None) -> np.ndarray:
     """(N,) log-likelihoods of configurations q (N, nq), C-contiguous and checked: forward
     kinematics to the camera frame (``frame_tables`` from
     :meth:`~drake_tracker.core.kinematics.BatchedKinematics.frame_tables`), rendering
     with ``lane_tables`` (:func:`~drake_tracker.core.lane_render.lane_tables`),
     ``frustum_planes`` and ``projection`` (fx, fy, cx, cy with the pixel-centre offset
     applied), and scoring, in one kernel call. Serial or parallel as ``policy`` chooses
-    (default: parallel whenever numba has more than one thread)."""
+    (default: parallel whenever numba has more than one thread). ``workspace``: from
+    :func:`kernel_workspace` for at least num_batch_chunks(N) chunks (default: made for
+    this call)."""
     height, width = observation.shape
     N = q.shape[0]
     out = np.zeros(N)
@@ -111,9 +134,12 @@ def fused_scores(q: np.ndarray, frame_tables: tuple, lane_tables: tuple,
         parallel = False
     kernel = _score_parallel if parallel else _score_serial
     t0 = time.perf_counter()
+    if workspace is None:
+        workspace = kernel_workspace(chunks if parallel else 1, frame_tables[0].shape[0] + 1,
+                                     lane_tables[0].shape[0], height, width)
     kernel(q, *frame_tables, *lane_tables, frustum_planes, fx, fy, cx, cy, near_m, far_m,
            chunks if parallel else 1, height, width, o.pixel_slot, o.pixel_table, o.uniform,
-           o.occluder_rate_per_m, o.occlusion_probability, o.truncation, out)
+           o.occluder_rate_per_m, o.occlusion_probability, o.truncation, workspace, out)
     if policy is not None:
         policy.record(parallel, time.perf_counter() - t0, N)
     return out
