@@ -1,0 +1,49 @@
+"""Keeps numba's on-disk cache of this package's kernels consistent with their sources.
+
+numba's cache keys a compiled function by its own source file's time stamp, not by the
+files of the functions and intrinsics it calls: a kernel whose file did not change is
+loaded from the cache with the code of a callee (in another file) that did. After a
+``git pull`` that changes, say, ``lanes.py`` but not ``render_likelihood.py``, that
+would run stale code (and can crash). :func:`clear_stale_kernel_cache`, run when
+``drake_tracker.core`` is imported (before any kernel is called), hashes the sources of
+this folder's modules and empties the folder's numba cache when they changed since it
+was filled. A cache elsewhere (numba's fallback for an unwritable package folder, or
+``NUMBA_CACHE_DIR``) is left alone: there, a release's files change together.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+_FOLDER = Path(__file__).resolve().parent
+_STAMP = "kernel_sources.sha256"
+
+
+def sources_hash(folder: Path = _FOLDER) -> str:
+    """SHA-256 of the folder's Python sources, in name order."""
+    digest = hashlib.sha256()
+    for path in sorted(folder.glob("*.py")):
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def clear_stale_kernel_cache(folder: Path = _FOLDER) -> bool:
+    """Removes the numba cache files (``*.nbi``, ``*.nbc``) of ``folder/__pycache__``
+    if the sources changed since the stamp there was written, and writes the new stamp.
+    Returns whether files were removed. Never raises for an unwritable folder."""
+    cache = folder / "__pycache__"
+    stamp = cache / _STAMP
+    current = sources_hash(folder)
+    try:
+        if stamp.exists() and stamp.read_text() == current:
+            return False
+        stale = list(cache.glob("*.nbi")) + list(cache.glob("*.nbc"))
+        for path in stale:
+            path.unlink(missing_ok=True)
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(current)
+        return bool(stale)
+    except OSError:
+        return False
