@@ -166,6 +166,37 @@ def test_diagram_context_can_be_copied_and_resimulated(apollo):
     np.testing.assert_array_equal(first, second)
 
 
+def test_a_copied_context_shares_the_stored_states_and_neither_sees_the_other(apollo):
+    """The systems' abstract states are never modified once stored (Drake copies them at
+    every update, so the copies share them): a Context copied mid-run keeps its own
+    buffer, gates and counts while the original goes on."""
+    h = 1.0 / 200.0
+    run = synthetic_run(apollo, duration_s=0.3, encoder_rate_hz=200.0, seed=5)
+    diagram, simulator, tracker, _ = _simulate(apollo, run, params(seed=5), h)
+    simulator.AdvanceTo(0.12)
+    systems = (tracker.delay_buffer, tracker.kalman_bank, tracker.image_update)
+
+    def snapshot(context):
+        buffer, bank, cpf = (s.GetMyContextFromRoot(context).get_abstract_state(0).get_value()
+                             for s in systems)
+        return (len(buffer.buffer), buffer.buffer.now_s, buffer.readings.last_raw_s,
+                buffer.readings.clock.latest_s, buffer.image_clock.latest_s,
+                buffer.correction.id, bank.gate.last_raw_s, bank.gate.clock.latest_s,
+                bank.time_s, cpf.last_sequence, cpf.images_applied, cpf.message.id)
+
+    saved = simulator.get_context().Clone()
+    before = snapshot(saved)
+    assert before == snapshot(simulator.get_context())
+    for system in systems:  # shared, not copied
+        assert (system.GetMyContextFromRoot(saved).get_abstract_state(0).get_value() is
+                system.GetMyContextFromRoot(simulator.get_context()).get_abstract_state(0)
+                .get_value())
+    simulator.AdvanceTo(0.25)
+    after = snapshot(simulator.get_context())
+    assert snapshot(saved) == before
+    assert after[1] > before[1] and after[6] > before[6] and after[11] > before[11]
+
+
 def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, caplog):
     import logging
 

@@ -26,7 +26,9 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class CpfState:
-    """The system's abstract state."""
+    """The system's abstract state. A stored one is never modified (``_update`` changes a
+    ``copy.copy`` of it and stores that, and every field is replaced, never mutated), so
+    Drake's copies of it, two at every update (1000 a simulated second), share it."""
 
     last_sequence: int = -1
     #: (sequence, capture stamp) of the last frame seen: a new pair is a new frame.
@@ -39,6 +41,9 @@ class CpfState:
     #: Frames not processed: not due (paced at ``min_image_interval_s``), unplaceable,
     #: malformed, or replaced on the port before the system looked.
     images_skipped: int = 0
+
+    def __deepcopy__(self, memo) -> CpfState:
+        return self
 
 
 class CpfImageUpdateSystem(LeafSystem):

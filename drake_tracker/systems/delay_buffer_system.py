@@ -37,7 +37,10 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class DelayBufferState:
-    """The system's abstract state (copied with the Context)."""
+    """The system's abstract state. A stored one is never modified: ``_update`` works on
+    a ``copy.copy`` of it and copies each part it changes (the buffer, a clock) before
+    changing it, so Drake's two copies of the state at every update (1000 a simulated
+    second) share it, and a copied Context still evolves on its own."""
 
     buffer: BeliefBuffer | None = None
     last_reading_time_s: float = float("-inf")
@@ -51,16 +54,7 @@ class DelayBufferState:
     frame_decision: StampDecision | None = None
 
     def __deepcopy__(self, memo) -> DelayBufferState:
-        # BeliefBuffer copies cheaply (shared immutable arrays); the rest is small.
-        return DelayBufferState(
-            buffer=copy.deepcopy(self.buffer, memo),
-            last_reading_time_s=self.last_reading_time_s,
-            last_observation_id=self.last_observation_id,
-            correction=self.correction,  # never mutated: replaced by a new one
-            readings=copy.deepcopy(self.readings, memo),
-            image_clock=copy.deepcopy(self.image_clock, memo),
-            frame_key=self.frame_key, frame_decision=self.frame_decision,
-        )
+        return self
 
 
 def frame_key(frame: DepthFrame) -> tuple:
@@ -130,23 +124,25 @@ class DelayBufferSystem(LeafSystem):
         return context.get_abstract_state(self._state).get_value()
 
     def _update(self, context, state):
-        s: DelayBufferState = state.get_mutable_abstract_state(self._state).get_value()
+        # The stored state is shared with Drake's copies: change a copy of it.
+        s: DelayBufferState = copy.copy(self.state(context))
         # Frames are judged against the buffer the CPF system saw (before this reading).
         self._judge_frame(self._frame_port.Eval(context), s)
         raw = float(self._time_port.Eval(context)[0])
         if s.readings.is_new(raw):
             reading = np.array(self._reading_port.Eval(context), float)
+            s.readings = copy.deepcopy(s.readings)
             t = s.readings.admit(raw, reading)
             if t is not None and self._params.use_joint_readings:
                 if s.readings.restarted:
                     s.buffer = None  # built on outlier stamps: restart from this reading
-                if s.buffer is None:
-                    s.buffer = new_belief_buffer(self._model, self._params, t, reading)
+                s.buffer = (new_belief_buffer(self._model, self._params, t, reading)
+                            if s.buffer is None else copy.deepcopy(s.buffer))
                 s.buffer.add_reading(t, full_reading(self._model, reading))
                 s.last_reading_time_s = t
             elif t is not None:
-                if s.buffer is None:
-                    s.buffer = new_belief_buffer(self._model, self._params, 0.0, None)
+                s.buffer = (new_belief_buffer(self._model, self._params, 0.0, None)
+                            if s.buffer is None else copy.deepcopy(s.buffer))
                 s.buffer.advance_to(t)
                 s.last_reading_time_s = t
         message = self._observation_port.Eval(context)
@@ -157,6 +153,7 @@ class DelayBufferSystem(LeafSystem):
             if problem is not None:
                 log.warning("image %d skipped: %s", message.sequence, problem)
             else:
+                s.buffer = copy.deepcopy(s.buffer)
                 s.buffer.add_image_observation(message.anchor, message.observation)
                 now, belief = s.buffer.present()
                 s.correction = BeliefCorrection(s.correction.id + 1, now,
@@ -168,6 +165,7 @@ class DelayBufferSystem(LeafSystem):
         if frame.is_empty or s.buffer is None or frame_key(frame) == s.frame_key:
             return
         s.frame_key = frame_key(frame)
+        s.image_clock = copy.deepcopy(s.image_clock)
         s.frame_decision = s.image_clock.check(image_time(frame, self._params))
         if s.frame_decision.reanchored_by_s is not None:
             log_reanchor(log, "image", s.frame_decision, frame.capture_time_s, s.image_clock)

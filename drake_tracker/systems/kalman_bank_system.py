@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import logging
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -28,12 +29,17 @@ log = logging.getLogger(__name__)
 class KalmanBankState:
     """The bank system's bookkeeping (its abstract state); the belief itself is the
     discrete state ``belief``. ``time_s``/``last_reading_s`` are None before the first
-    reading; ``correction_id`` is the latest delay-buffer correction adopted."""
+    reading; ``correction_id`` is the latest delay-buffer correction adopted. A stored
+    one is never modified (``_update`` changes a ``copy.copy`` of it, and a copy of the
+    gate), so Drake's two copies of it at every update share it."""
 
     gate: ReadingGate
     time_s: float | None = None
     last_reading_s: float | None = None
     correction_id: int = 0
+
+    def __deepcopy__(self, memo) -> KalmanBankState:
+        return self
 
 
 class JointKalmanBankSystem(LeafSystem):
@@ -122,8 +128,8 @@ class JointKalmanBankSystem(LeafSystem):
 
     def _update(self, context, state):
         belief = self.belief(context).copy()
-        # ``state`` is already the update's own copy of the context's state.
-        s: KalmanBankState = state.get_mutable_abstract_state(self._bookkeeping).get_value()
+        # The stored bookkeeping is shared with Drake's copies: change a copy of it.
+        s: KalmanBankState = copy.copy(self.bookkeeping(context))
         correction = self._correction_port.Eval(context)
         if correction.id > s.correction_id and correction.belief is not None:
             belief = correction.belief.copy()
@@ -132,6 +138,7 @@ class JointKalmanBankSystem(LeafSystem):
         raw = float(self._time_port.Eval(context)[0])
         if self._params.use_joint_readings and s.gate.is_new(raw):
             reading = np.array(self._reading_port.Eval(context), float)
+            s.gate = copy.deepcopy(s.gate)
             belief = self._filter(s, s.gate.admit(raw, reading), reading, belief)
         state.get_mutable_discrete_state(self._belief).SetFromVector(belief.ravel())
         state.get_mutable_abstract_state(self._bookkeeping).set_value(s)
