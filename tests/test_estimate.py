@@ -1,0 +1,40 @@
+"""The pose readout: one configuration through the serial kernel gives exactly what the
+batched kinematics give."""
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.estimate import PoseReadout
+from drake_tracker.robot import build_tracker_model, robot_preset
+
+
+@pytest.fixture(scope="module")
+def arm6():
+    return build_tracker_model(robot_preset("arm6"))
+
+
+@pytest.mark.parametrize("robot", ["apollo", "arm6"])
+def test_one_configuration_gives_exactly_the_batched_poses(robot, request):
+    model = request.getfixturevalue(robot)
+    readout = PoseReadout(model)
+    kinematics = readout.kinematics
+    q = np.random.default_rng(1).normal(0.0, 1.0, (50, model.num_joints))
+    batched = readout.poses(q)  # N > 1: the parallel kernel
+    for k in range(len(q)):
+        np.testing.assert_array_equal(readout.body_poses(q[k]), kinematics.body_poses(q[k]))
+        X_WC = kinematics.frame_poses(q[k], model.camera_frame)
+        X_WE = kinematics.frame_poses(q[k], model.end_effector_frame)
+        plain = (np.linalg.inv(X_WC) @ X_WE, X_WE, X_WC)
+        for one, expected, many in zip(readout.poses(q[k]), plain, batched):
+            assert one.shape == (1, 4, 4)
+            np.testing.assert_array_equal(one, expected)
+            np.testing.assert_array_equal(one[0], many[k])
+
+
+def test_non_finite_positions_are_refused_on_either_path(apollo):
+    readout = PoseReadout(apollo)
+    q = np.zeros(apollo.num_joints)
+    q[2] = np.nan
+    for bad in (q, np.array([q, q])):
+        with pytest.raises(ValueError, match="NaN or infinite"):
+            readout.poses(bad)
