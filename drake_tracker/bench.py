@@ -218,7 +218,8 @@ def format_bench(result: dict) -> str:
             f"  per second of CPU time, 1 thread: {r['threads']['1']['updates_per_cpu_s']:.1f}",
             "  us per evaluation (1 thread): " + ", ".join(
                 f"{k} {v:.1f}" for k, v in stages.items()),
-            f"  CPF Python outside the kernel: {r['threads']['1']['python_us_per_block']:.0f}"
+            f"  Python outside the compiled sweeps: "
+            f"{r['threads']['1']['python_us_per_block']:.0f}"
             f" us per block call x {r['block_calls_per_update']} = "
             f"{_python_share(r):.0f} % of an update (1 thread)",
             f"  Drake RenderEngineVtk {r['drake_us_per_image']:.0f} us per image: "
