@@ -115,3 +115,16 @@ def test_ramp_preset_and_profile_errors():
     e.bias_profiles = {"elbow": BiasProfile()}
     with pytest.raises(ValueError, match=r"encoders\.bias_profiles"):
         validate_scenario(s)
+
+
+@pytest.mark.parametrize("bias", ["none", "constant", "random-walk", "steps", "ramp"])
+def test_a_time_independent_bias_computed_once_equals_the_formula(bias):
+    profiles = {"c": BiasProfile(kind="constant", value_deg=-3.0),
+                "d": BiasProfile(kind="random-walk")}
+    config = EncoderConfig(bias=bias, constant_bias_deg=8.6, bias_profiles=profiles)
+    model = JointBiasModel(config, NAMES, ["a", "b"])
+    for t in (0.0, 0.37, 2.5, 11.0):
+        fixed = model.deterministic(t)
+        np.testing.assert_array_equal(fixed, model._deterministic(t))
+        fixed[:] = 99.0  # a copy: the next sample is not affected
+        assert not np.array_equal(model.deterministic(t), fixed)

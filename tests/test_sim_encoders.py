@@ -121,3 +121,37 @@ def test_counter_based_draws_do_not_overlap_between_indices():
 def test_unknown_biased_joint_is_rejected():
     with pytest.raises(ValueError, match="biased_joints"):
         BiasedEncoders(NAMES, EncoderConfig(), 0, ["nope"])
+
+
+def test_counter_normals_draw_exactly_what_sample_normals_draws():
+    from drake_tracker.sim.streams import CounterNormals
+
+    for seed, stream in ((0, 0), (3, 0), (11, 7), (2**63, 0)):
+        draw = CounterNormals(seed, stream)
+        for index in (0, 1, 2, 999, 123_456, 2**32 + 5, 2**64 - 1):
+            for size in (1, 14, 257):
+                np.testing.assert_array_equal(draw(index, size),
+                                              sample_normals(seed, index, size, stream))
+
+
+@pytest.mark.parametrize("bias", ["constant", "steps", "random-walk"])
+def test_readings_are_exactly_the_plain_formula(bias):
+    """Every reading is quantize(true + bias + sigma * sample_normals(seed, k)[:n]), its
+    bias the model's next() with the rest of those draws (the system writes them straight
+    into its state and draws through CounterNormals)."""
+    from drake_tracker.sim.bias import JointBiasModel
+    from drake_tracker.sim.encoders import quantize
+
+    config = EncoderConfig(rate_hz=100.0, bias=bias, constant_bias_deg=8.6,
+                           quantization_deg=0.01, step_period_s=0.05)
+    stamps, readings, biases = run_encoders(config, 0.3, seed=4)
+    model = JointBiasModel(config, NAMES, ["a", "b"])
+    previous, n = np.zeros(3), len(NAMES)
+    for k, t in enumerate(stamps):
+        draws = sample_normals(4, k, 2 * n)
+        bias_k = model.next(previous, t, None if k == 0 else t - stamps[k - 1], draws[n:])
+        expected = quantize(TRUE_Q + bias_k + np.radians(config.noise_sigma_deg) * draws[:n],
+                            np.radians(config.quantization_deg))
+        np.testing.assert_array_equal(biases[k], bias_k)
+        np.testing.assert_array_equal(readings[k], expected)
+        previous = bias_k

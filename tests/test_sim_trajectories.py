@@ -85,3 +85,29 @@ def test_every_preset_is_valid_and_within_joint_limits():
     validate_scenario(load_scenario("occlusion/time-varying"))
     validate_scenario(load_scenario("occlusion-heavy/ramp"))
     validate_scenario(load_scenario("s-head-arm-mismatch/constant"))
+
+
+def _plain_sinusoid(traj, t):
+    """The sinusoid's formula joint by joint (what ``positions`` computes all at once)."""
+    t = np.atleast_1d(np.asarray(t, float))
+    q = np.tile(traj.home, (len(t), 1))
+    for k, j in enumerate(traj.moved):
+        period = traj.period_s * (1.0 + 0.17 * k)
+        q[:, j] += traj.amplitude * np.sin(2 * np.pi * t / period + k * np.pi / 3)
+    return q
+
+
+@pytest.mark.parametrize("joints", [[], ["j0", "j2"], ["j1", "j1", "j2"]])
+def test_sinusoid_equals_its_joint_by_joint_formula_bit_for_bit(joints):
+    config = TrajectoryConfig(kind="sinusoid", joints=joints, amplitude_deg=23.0,
+                              period_s=3.7, home_deg={"j1": 30.0})
+    traj = make_joint_trajectory(config, NAMES, None, seed=0)
+    times = np.concatenate([np.arange(0.0, 3.0, 1e-3),
+                            np.random.default_rng(1).uniform(-5.0, 1e4, 3000)])
+    for t in times[::7]:
+        np.testing.assert_array_equal(traj.positions(t), _plain_sinusoid(traj, t))
+    for count in (1, 2, 5, 8, 9, len(times)):
+        np.testing.assert_array_equal(traj.positions(times[:count]),
+                                      _plain_sinusoid(traj, times[:count]))
+    traj.period_s = 1.3  # the cached periods follow a change
+    np.testing.assert_array_equal(traj.positions(times), _plain_sinusoid(traj, times))

@@ -140,9 +140,22 @@ class JointBiasModel:
             self.is_random_walk[self._shared] = True
         for j, p in self._profiles.items():
             self.is_random_walk[j] = p.kind == "random-walk"
+        self._any_random_walk = bool(self.is_random_walk.any())
+        #: The time-only part when no model depends on time (none, constant, random-walk
+        #: everywhere): computed once, not at every sample.
+        steady = ("none", "constant", "random-walk")
+        self._fixed = None
+        if config.bias in steady and all(p.kind in steady for p in self._profiles.values()):
+            self._fixed = self._deterministic(0.0)
+            self._fixed.flags.writeable = False
 
     def deterministic(self, t: float) -> np.ndarray:
         """(n,) the time-only part of the bias at ``t`` (0 on random-walk joints)."""
+        if self._fixed is not None:
+            return self._fixed.copy()
+        return self._deterministic(t)
+
+    def _deterministic(self, t: float) -> np.ndarray:
         bias = np.zeros(self._n)
         if len(self._shared) and self._config.bias != "random-walk":
             bias[self._shared] = deterministic_bias(self._config, [t], len(self._shared))[0]
@@ -155,7 +168,7 @@ class JointBiasModel:
         """(n,) bias at sample time ``t``: the random walk steps from ``previous`` by
         ``dt`` with the standard normals ``draws`` (n,); ``dt`` None = the first sample."""
         bias = self.deterministic(t)
-        if not self.is_random_walk.any():
+        if not self._any_random_walk:
             return bias
         walk = np.array(previous, float, copy=True)
         if dt is not None:

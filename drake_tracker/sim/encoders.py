@@ -17,7 +17,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from drake_tracker.sim.bias import JointBiasModel
 from drake_tracker.sim.config import EncoderConfig
-from drake_tracker.sim.streams import sample_normals
+from drake_tracker.sim.streams import CounterNormals, sample_normals
 
 __all__ = ["BiasedEncoders", "quantize", "sample_normals"]
 
@@ -45,6 +45,7 @@ class BiasedEncoders(LeafSystem):
         n = len(self._names)
         self._n = n
         self._seed = int(seed)
+        self._normals = CounterNormals(self._seed)  # sample_normals(seed, k, .), faster
         self._period = 1.0 / config.rate_hz
         biased = list(config.biased_joints) if biased_joints is None else list(biased_joints)
         self._bias = JointBiasModel(config, self._names, biased)
@@ -54,7 +55,7 @@ class BiasedEncoders(LeafSystem):
         initial[0] = -1.0
         initial[1] = -1.0
         self._state = self.DeclareDiscreteState(initial)
-        self.DeclareVectorInputPort("true_position", n)
+        self._true_position = self.DeclareVectorInputPort("true_position", n)
         self.DeclareVectorOutputPort("measured_position", n, self._calc_measured,
                                      {self.discrete_state_ticket(self._state)})
         self.DeclareVectorOutputPort("measurement_time", 1, self._calc_time,
@@ -73,13 +74,15 @@ class BiasedEncoders(LeafSystem):
         n = self._n
         index = int(round(x[0])) + 1
         t = context.get_time()
-        true_q = self.get_input_port(0).Eval(context)
-        draws = sample_normals(self._seed, index, 2 * n)
+        true_q = self._true_position.Eval(context)
+        draws = self._normals(index, 2 * n)
         dt = max(t - x[1], 0.0) if index > 0 else None
         bias = self._bias.next(x[2 + n:], t, dt, draws[n:])
         reading = quantize(true_q + bias + self._noise_rad * draws[:n], self._quant_rad)
-        out = np.concatenate([[index, t], reading, bias])
-        discrete_state.get_mutable_vector(self._state).SetFromVector(out)
+        out = discrete_state.get_mutable_vector(self._state).get_mutable_value()
+        out[0], out[1] = index, t
+        out[2:2 + n] = reading
+        out[2 + n:] = bias
 
     def _calc_measured(self, context, output: BasicVector):
         x = context.get_discrete_state(self._state).get_value()

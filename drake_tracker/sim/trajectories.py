@@ -18,7 +18,7 @@ checks the joint limits on samples ``sample_rate_hz`` per second over the run.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -63,16 +63,24 @@ class JointTrajectory:
     excursion_index: int = -1
     excursion: float = 0.0
     excursion_window: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: (period_s, moved) -> the sinusoids' periods and phases (see ``_sinusoids``).
+    _sinusoid_terms: tuple | None = field(default=None, init=False, repr=False,
+                                          compare=False)
 
     def positions(self, t: ArrayLike) -> np.ndarray:
         """Joint positions (T, n) at times ``t`` (s; a scalar or (T,)), in rad (m for prismatic
         joints), by ``kind`` as the module doc describes."""
         t = np.atleast_1d(np.asarray(t, float))
-        q = np.tile(self.home, (len(t), 1))
-        if self.kind == "sinusoid":
-            for k, j in enumerate(self.moved):
-                period = self.period_s * (1.0 + 0.17 * k)
-                q[:, j] += self.amplitude * np.sin(2 * np.pi * t / period + k * np.pi / 3)
+        q = np.empty((len(t), len(self.home)))
+        q[:] = self.home
+        if self.kind == "sinusoid" and len(self.moved):
+            # Moved joint k's formula, the same operations for all k at once.
+            moved, periods, phases, unique = self._sinusoids()
+            terms = self.amplitude * np.sin(2 * np.pi * t[:, None] / periods + phases)
+            if unique:
+                q[:, moved] += terms
+            else:  # a joint listed twice moves by both of its sinusoids
+                np.add.at(q, (slice(None), moved), terms)
         elif self.kind in ("free", "in-out-in"):
             for k, j in enumerate(self.moved):
                 arg = 2 * np.pi * np.outer(t, self.freqs[k]) + self.phases[k]
@@ -81,6 +89,18 @@ class JointTrajectory:
                 q[:, self.excursion_index] += self.excursion * smooth_window(
                     t, *self.excursion_window)
         return q
+
+    def _sinusoids(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """The moved joints, their periods ``period_s (1 + 0.17 k)`` and phases
+        ``k pi / 3`` (k-th moved joint), and whether no joint is listed twice; kept
+        while ``period_s`` and ``moved`` stay the same."""
+        moved = np.asarray(self.moved, int)
+        key = (self.period_s, moved.tobytes())
+        if self._sinusoid_terms is None or self._sinusoid_terms[0] != key:
+            k = np.arange(len(moved))
+            self._sinusoid_terms = (key, moved.copy(), self.period_s * (1.0 + 0.17 * k),
+                                    k * np.pi / 3, len(np.unique(moved)) == len(moved))
+        return self._sinusoid_terms[1:]
 
     def velocities(self, t: ArrayLike, h: float = 1e-4) -> np.ndarray:
         """Central differences of ``positions`` (the functions are smooth)."""
