@@ -186,3 +186,21 @@ def test_image_anchor_interpolates_the_readings_and_falls_back_across_a_gap():
     gap = buf.image_anchor(0.1)
     assert gap.anchor_time_s == 0.1 and not np.any(gap.angle_shift)
     assert np.all(gap.prior[VAR_A] > buf.belief_at(0.012)[VAR_A])
+
+
+def test_a_copied_buffer_goes_on_alone_and_steps_as_the_bank_does():
+    """``copy()`` (the delay buffer system's copy per reading) shares the stored arrays
+    but not the lists: each copy goes on on its own; a reading is the bank's checked step."""
+    bank = _bank()
+    start = initial_moments(np.zeros(N), np.full(N, 0.1), np.full(N, 0.05),
+                            np.array([True, True, True, False]))
+    buf = BeliefBuffer(bank, start, 0.0, horizon_s=0.05)
+    expected, rng = start, np.random.default_rng(2)
+    for k in range(1, 30):
+        reading = rng.normal(0.0, 0.1, N)
+        copy, before = buf.copy(), (len(buf), buf.now_s)
+        belief = copy.add_reading(0.01 * k, reading)
+        np.testing.assert_array_equal(belief, bank.step(expected, 0.01 * k - 0.01 * (k - 1),
+                                                        reading))
+        assert (len(buf), buf.now_s) == before and copy.now_s == 0.01 * k
+        buf, expected = copy, belief

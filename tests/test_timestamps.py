@@ -301,8 +301,9 @@ def test_a_clock_step_shared_by_encoders_and_camera_is_followed_by_both(apollo, 
     assert_same_when_settled(stepped, diagram, offline)
 
 
-def test_a_copied_gate_is_independent_and_shares_only_what_never_changes():
-    """Drake deep-copies the systems' abstract state at every update: the gate's copy
+@pytest.mark.parametrize("how", ["deepcopy", "copy"])
+def test_a_copied_gate_is_independent_and_shares_only_what_never_changes(how):
+    """The systems copy their gate at every sample: the copy (``copy()``, or a deep copy)
     must take the same decisions as the original from then on, and neither may see the
     other's later samples."""
     import copy
@@ -313,7 +314,7 @@ def test_a_copied_gate_is_independent_and_shares_only_what_never_changes():
     for k in range(20):
         gate.admit(0.01 * k, np.zeros(2))
     gate.admit(float("nan"), np.zeros(2))
-    clone = copy.deepcopy(gate)
+    clone = copy.deepcopy(gate) if how == "deepcopy" else gate.copy()
     assert clone.logger is gate.logger and clone.clock.params is gate.clock.params
     for later in (0.25, 0.26, 1000.0):
         assert clone.admit(later, np.zeros(2)) == gate.admit(later, np.zeros(2))
@@ -357,3 +358,17 @@ def test_an_encoder_clock_step_forward_is_told_from_a_gap_by_the_images(apollo, 
     diagram, images_applied = simulate(apollo, run, p, stamps)
     assert images_applied == sum(applied.values())
     assert_same_when_settled(run, diagram, offline)
+
+
+def test_median_is_numpys_median_bit_for_bit():
+    from collections import deque
+
+    from drake_tracker.core.timestamps import RECENT_GAPS, median
+
+    rng = np.random.default_rng(0)
+    for n in range(1, RECENT_GAPS + 1):
+        for values in (rng.uniform(0.0, 0.01, n), rng.normal(0.0, 1.0, n),
+                       0.001 * rng.integers(1, 3, n), np.round(rng.uniform(0, 1e-3, n), 6)):
+            window = deque(values.tolist(), maxlen=RECENT_GAPS)
+            assert median(window) == float(np.median(window))
+    assert np.isnan(median([1.0, float("nan"), 2.0]))

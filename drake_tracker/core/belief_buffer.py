@@ -179,16 +179,19 @@ class BeliefBuffer:
         self._last_reading_time = -np.inf
         self._now = float(initial_time_s)
 
-    def __deepcopy__(self, memo) -> BeliefBuffer:
-        """A copy that shares the stored arrays: the buffer never modifies an array in
-        place (every update stores a new one), so sharing them is safe and makes copying a
-        Drake Context holding a buffer cost a few list copies, not a deep copy."""
+    def copy(self) -> BeliefBuffer:
+        """An independent copy that shares the stored arrays: the buffer never modifies an
+        array in place (every update stores a new one), so sharing them is safe and makes
+        a copy cost a few list copies, not a deep copy."""
         clone = object.__new__(BeliefBuffer)
         clone.__dict__.update(self.__dict__)
         clone._events = list(self._events)
         clone._beliefs = list(self._beliefs)
         clone._times = list(self._times)
         return clone
+
+    def __deepcopy__(self, memo) -> BeliefBuffer:
+        return self.copy()
 
     # ----------------------------------------------------------------- queries
     @property
@@ -238,8 +241,9 @@ class BeliefBuffer:
                 f"joint reading stamped {t} s is not after the previous one "
                 f"({self._last_reading_time} s)")
         reading = self.bank.check_reading(reading).copy()
-        k, t0, belief = self._latest_at_or_before(t)
-        self._insert(k, _Event(float(t), reading=reading), self.bank.step(belief, t - t0, reading))
+        k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
+        self._insert(k, _Event(float(t), reading=reading),
+                     self.bank.step_unchecked(belief, float(t - t0), reading))
         self._last_reading_time = float(t)
         if k < len(self._events) - 1:
             self._replay_from(k + 1)

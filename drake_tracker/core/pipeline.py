@@ -375,8 +375,10 @@ def robot_joint_indices(model: TrackerModel) -> np.ndarray:
     return np.array([model.joint_names.index(n) for n in model.robot_joint_names], int)
 
 
-def full_reading(model: TrackerModel, robot_reading: np.ndarray) -> np.ndarray:
-    """The bank's reading vector: the robot joints' readings, 0 for the virtual joints."""
+def full_reading(model: TrackerModel, robot_reading: np.ndarray,
+                 robot_indices: np.ndarray | None = None) -> np.ndarray:
+    """The bank's reading vector: the robot joints' readings, 0 for the virtual joints.
+    ``robot_indices``: ``robot_joint_indices(model)``, for a caller that keeps it."""
     q = np.zeros(model.num_joints)
-    q[robot_joint_indices(model)] = robot_reading
+    q[robot_joint_indices(model) if robot_indices is None else robot_indices] = robot_reading
     return q

@@ -30,7 +30,9 @@ from __future__ import annotations
 
 import copy
 import logging
+import math
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -55,11 +57,14 @@ class RateLimitedWarning:
         self.enabled = enabled
         self.counts: dict[str, int] = {}
 
-    def __deepcopy__(self, memo) -> RateLimitedWarning:
-        # Drake copies a system's abstract state at every update: share the logger.
+    def copy(self) -> RateLimitedWarning:
+        """An independent copy that shares the logger."""
         clone = RateLimitedWarning(self.logger, self.enabled)
         clone.counts = dict(self.counts)
         return clone
+
+    def __deepcopy__(self, memo) -> RateLimitedWarning:
+        return self.copy()
 
     def warn(self, kind: str, message: str) -> None:
         """Counts one warning of ``kind`` and logs ``message`` at the 1st, 10th, 100th, ... of
@@ -75,6 +80,18 @@ def _is_power_of_ten(count: int) -> bool:
     while count % 10 == 0:
         count //= 10
     return count == 1
+
+
+def median(values: Iterable[float]) -> float:
+    """``float(np.median(values))`` of a few floats (the middle one, or the mean of the
+    two middle ones; NaN if any is NaN), without numpy's overhead: a stream's recent
+    period is taken at every sample, 1000 times a simulated second."""
+    ordered = sorted(values)
+    n = len(ordered)
+    if n == 0 or any(v != v for v in ordered):
+        return float("nan")
+    m = n // 2
+    return float(ordered[m]) if n % 2 else (ordered[m - 1] + ordered[m]) / 2
 
 
 @dataclass(frozen=True)
@@ -123,19 +140,23 @@ class StreamClock:
         self._lag_run_count = 0
         self._lag_run_first = 0.0
 
-    def __deepcopy__(self, memo) -> StreamClock:
-        """A copy that shares the (immutable) parameters and name: Drake copies a
-        system's abstract state at every update, 1000 times a simulated second."""
+    def copy(self) -> StreamClock:
+        """An independent copy that shares the (immutable) parameters and name: the
+        tracker's systems copy their clocks at every sample, 1000 times a simulated
+        second."""
         clone = object.__new__(StreamClock)
         clone.__dict__.update(self.__dict__)
         clone._gaps = self._gaps.copy()
         clone._lags = self._lags.copy()
         return clone
 
+    def __deepcopy__(self, memo) -> StreamClock:
+        return self.copy()
+
     @property
     def recent_period_s(self) -> float:
         """Median of the latest accepted gaps (0 before two stamps)."""
-        return float(np.median(self._gaps)) if self._gaps else 0.0
+        return median(self._gaps) if self._gaps else 0.0
 
     @property
     def typical_lag_s(self) -> float | None:
@@ -143,7 +164,7 @@ class StreamClock:
         :meth:`follow_reference`), or None before ``reanchor_after_samples`` of them."""
         if len(self._lags) < self.params.reanchor_after_samples:
             return None
-        return float(np.median(self._lags))
+        return median(self._lags)
 
     def future_limit_s(self) -> float:
         """How far after the latest accepted stamp a stamp may be (s)."""
@@ -152,12 +173,12 @@ class StreamClock:
 
     def peek(self, raw_s: float) -> StampDecision:
         """What :meth:`check` would decide, without changing anything."""
-        return copy.deepcopy(self).check(raw_s)
+        return self.copy().check(raw_s)
 
     def check(self, raw_s: float) -> StampDecision:
         """Maps ``raw_s`` to the tracker's time base, or rejects it (see the module)."""
         raw = float(raw_s)
-        if not np.isfinite(raw):
+        if not math.isfinite(raw):
             return StampDecision(None, f"its time stamp {raw} is not finite", "non-finite stamps")
         if self.latest_s is None:
             return self._accept(raw)
@@ -272,26 +293,32 @@ class ReadingGate:
         #: (``StampDecision.restarted``): the caller restarts its belief from it.
         self.restarted = False
 
+    def copy(self) -> ReadingGate:
+        """An independent copy that shares the logger and joint names (see StreamClock's)."""
+        return self._with(self.clock.copy(), self.warnings.copy())
+
     def __deepcopy__(self, memo) -> ReadingGate:
-        """A copy that shares the logger and joint names (see StreamClock's)."""
+        return self._with(copy.deepcopy(self.clock, memo), copy.deepcopy(self.warnings, memo))
+
+    def _with(self, clock: StreamClock, warnings: RateLimitedWarning) -> ReadingGate:
         clone = object.__new__(ReadingGate)
         clone.__dict__.update(self.__dict__)
-        clone.clock = copy.deepcopy(self.clock, memo)
-        clone.warnings = copy.deepcopy(self.warnings, memo)
+        clone.clock, clone.warnings = clock, warnings
         return clone
 
     def is_new(self, raw_s: float) -> bool:
         """Whether a stamp held on a port is a new sample (differs from the last seen)."""
         raw = float(raw_s)
-        return not (raw == self.last_raw_s or (np.isnan(raw) and np.isnan(self.last_raw_s)))
+        return not (raw == self.last_raw_s or (math.isnan(raw) and math.isnan(self.last_raw_s)))
 
     def admit(self, raw_s: float, values: np.ndarray) -> float | None:
         """The reading's time in the tracker's time base, or None (skipped, logged)."""
         self.last_raw_s = float(raw_s)
         self.restarted = False
-        with np.errstate(invalid="ignore"):
-            bad = ~(np.abs(values) <= MAX_READING_MAGNITUDE)  # NaN, ±inf, absurd values
-        if np.any(bad):
+        # NaN, ±inf, absurd values: a plain loop over the few joints is the fast check.
+        if not all(abs(v) <= MAX_READING_MAGNITUDE for v in np.ravel(values).tolist()):
+            with np.errstate(invalid="ignore"):
+                bad = ~(np.abs(values) <= MAX_READING_MAGNITUDE)
             if self.gap_start_s is None:
                 self.gap_start_s = float(raw_s)
                 names = [n for n, b in zip(self.joint_names, bad, strict=True) if b]

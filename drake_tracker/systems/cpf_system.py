@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -27,7 +26,7 @@ log = logging.getLogger(__name__)
 @dataclass
 class CpfState:
     """The system's abstract state. A stored one is never modified (``_update`` changes a
-    ``copy.copy`` of it and stores that, and every field is replaced, never mutated), so
+    ``copy()`` of it and stores that, and every field is replaced, never mutated), so
     Drake's copies of it, two at every update (1000 a simulated second), share it."""
 
     last_sequence: int = -1
@@ -44,6 +43,12 @@ class CpfState:
 
     def __deepcopy__(self, memo) -> CpfState:
         return self
+
+    def copy(self) -> CpfState:
+        """A shallow copy: an update's own, whose fields it replaces."""
+        clone = object.__new__(CpfState)
+        clone.__dict__.update(self.__dict__)
+        return clone
 
 
 class CpfImageUpdateSystem(LeafSystem):
@@ -98,7 +103,7 @@ class CpfImageUpdateSystem(LeafSystem):
         return context.get_abstract_state(self._state).get_value()
 
     def _update(self, context, state):
-        s: CpfState = copy.copy(self.state(context))
+        s = self.state(context).copy()
         frame: DepthFrame = self._frame_port.Eval(context)
         key = (frame.sequence, repr(frame.capture_time_s))
         if frame.is_empty or key == s.last_frame:

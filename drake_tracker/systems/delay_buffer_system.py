@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -18,6 +17,7 @@ from drake_tracker.core.pipeline import (
     image_time,
     make_bank_and_prior,
     new_belief_buffer,
+    robot_joint_indices,
 )
 from drake_tracker.core.timestamps import (
     ReadingGate,
@@ -38,7 +38,7 @@ log = logging.getLogger(__name__)
 @dataclass
 class DelayBufferState:
     """The system's abstract state. A stored one is never modified: ``_update`` works on
-    a ``copy.copy`` of it and copies each part it changes (the buffer, a clock) before
+    a ``copy()`` of it and copies each part it changes (the buffer, a clock) before
     changing it, so Drake's two copies of the state at every update (1000 a simulated
     second) share it, and a copied Context still evolves on its own."""
 
@@ -55,6 +55,12 @@ class DelayBufferState:
 
     def __deepcopy__(self, memo) -> DelayBufferState:
         return self
+
+    def copy(self) -> DelayBufferState:
+        """A shallow copy: an update's own, whose parts it replaces before changing."""
+        clone = object.__new__(DelayBufferState)
+        clone.__dict__.update(self.__dict__)
+        return clone
 
 
 def frame_key(frame: DepthFrame) -> tuple:
@@ -98,6 +104,7 @@ class DelayBufferSystem(LeafSystem):
             raise ValueError(f"DelayBufferSystem: period_s must be > 0, got {period_s}")
         self._model = model
         self._params = params
+        self._robot_indices = robot_joint_indices(model)
         make_bank_and_prior(model, params, None)  # validates the parameters now
         stamps = params.timestamps
         self._state = self.DeclareAbstractState(AbstractValue.Make(DelayBufferState(
@@ -125,24 +132,24 @@ class DelayBufferSystem(LeafSystem):
 
     def _update(self, context, state):
         # The stored state is shared with Drake's copies: change a copy of it.
-        s: DelayBufferState = copy.copy(self.state(context))
+        s = self.state(context).copy()
         # Frames are judged against the buffer the CPF system saw (before this reading).
         self._judge_frame(self._frame_port.Eval(context), s)
         raw = float(self._time_port.Eval(context)[0])
         if s.readings.is_new(raw):
             reading = np.array(self._reading_port.Eval(context), float)
-            s.readings = copy.deepcopy(s.readings)
+            s.readings = s.readings.copy()
             t = s.readings.admit(raw, reading)
             if t is not None and self._params.use_joint_readings:
                 if s.readings.restarted:
                     s.buffer = None  # built on outlier stamps: restart from this reading
                 s.buffer = (new_belief_buffer(self._model, self._params, t, reading)
-                            if s.buffer is None else copy.deepcopy(s.buffer))
-                s.buffer.add_reading(t, full_reading(self._model, reading))
+                            if s.buffer is None else s.buffer.copy())
+                s.buffer.add_reading(t, full_reading(self._model, reading, self._robot_indices))
                 s.last_reading_time_s = t
             elif t is not None:
                 s.buffer = (new_belief_buffer(self._model, self._params, 0.0, None)
-                            if s.buffer is None else copy.deepcopy(s.buffer))
+                            if s.buffer is None else s.buffer.copy())
                 s.buffer.advance_to(t)
                 s.last_reading_time_s = t
         message = self._observation_port.Eval(context)
@@ -153,7 +160,7 @@ class DelayBufferSystem(LeafSystem):
             if problem is not None:
                 log.warning("image %d skipped: %s", message.sequence, problem)
             else:
-                s.buffer = copy.deepcopy(s.buffer)
+                s.buffer = s.buffer.copy()
                 s.buffer.add_image_observation(message.anchor, message.observation)
                 now, belief = s.buffer.present()
                 s.correction = BeliefCorrection(s.correction.id + 1, now,
@@ -165,7 +172,7 @@ class DelayBufferSystem(LeafSystem):
         if frame.is_empty or s.buffer is None or frame_key(frame) == s.frame_key:
             return
         s.frame_key = frame_key(frame)
-        s.image_clock = copy.deepcopy(s.image_clock)
+        s.image_clock = s.image_clock.copy()
         s.frame_decision = s.image_clock.check(image_time(frame, self._params))
         if s.frame_decision.reanchored_by_s is not None:
             log_reanchor(log, "image", s.frame_decision, frame.capture_time_s, s.image_clock)

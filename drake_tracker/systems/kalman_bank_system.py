@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 import logging
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -14,7 +13,7 @@ from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.pipeline import full_reading, make_bank_and_prior
+from drake_tracker.core.pipeline import full_reading, make_bank_and_prior, robot_joint_indices
 from drake_tracker.core.timestamps import ReadingGate
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
@@ -30,7 +29,7 @@ class KalmanBankState:
     """The bank system's bookkeeping (its abstract state); the belief itself is the
     discrete state ``belief``. ``time_s``/``last_reading_s`` are None before the first
     reading; ``correction_id`` is the latest delay-buffer correction adopted. A stored
-    one is never modified (``_update`` changes a ``copy.copy`` of it, and a copy of the
+    one is never modified (``_update`` changes a ``copy()`` of it, and a copy of the
     gate), so Drake's two copies of it at every update share it."""
 
     gate: ReadingGate
@@ -40,6 +39,12 @@ class KalmanBankState:
 
     def __deepcopy__(self, memo) -> KalmanBankState:
         return self
+
+    def copy(self) -> KalmanBankState:
+        """A shallow copy: an update's own, whose gate it replaces before changing."""
+        clone = object.__new__(KalmanBankState)
+        clone.__dict__.update(self.__dict__)
+        return clone
 
 
 class JointKalmanBankSystem(LeafSystem):
@@ -88,6 +93,7 @@ class JointKalmanBankSystem(LeafSystem):
         self._params = params
         self._n = model.num_joints
         self._robot_n = len(model.robot_joint_names)
+        self._robot_indices = robot_joint_indices(model)
         self._bank, _ = make_bank_and_prior(model, params, None)
         self._readout = PoseReadout(model)
         n = self._n
@@ -129,7 +135,7 @@ class JointKalmanBankSystem(LeafSystem):
     def _update(self, context, state):
         belief = self.belief(context).copy()
         # The stored bookkeeping is shared with Drake's copies: change a copy of it.
-        s: KalmanBankState = copy.copy(self.bookkeeping(context))
+        s = self.bookkeeping(context).copy()
         correction = self._correction_port.Eval(context)
         if correction.id > s.correction_id and correction.belief is not None:
             belief = correction.belief.copy()
@@ -138,7 +144,7 @@ class JointKalmanBankSystem(LeafSystem):
         raw = float(self._time_port.Eval(context)[0])
         if self._params.use_joint_readings and s.gate.is_new(raw):
             reading = np.array(self._reading_port.Eval(context), float)
-            s.gate = copy.deepcopy(s.gate)
+            s.gate = s.gate.copy()
             belief = self._filter(s, s.gate.admit(raw, reading), reading, belief)
         state.get_mutable_discrete_state(self._belief).SetFromVector(belief.ravel())
         state.get_mutable_abstract_state(self._bookkeeping).set_value(s)
@@ -156,7 +162,8 @@ class JointKalmanBankSystem(LeafSystem):
             _, belief = make_bank_and_prior(self._model, self._params, reading)
             s.time_s = t
         belief = self._bank.step_unchecked(belief, t - s.time_s,
-                                           full_reading(self._model, reading))
+                                           full_reading(self._model, reading,
+                                                        self._robot_indices))
         s.time_s = s.last_reading_s = t
         return belief
 
