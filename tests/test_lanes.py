@@ -157,3 +157,26 @@ def test_lane_forward_kinematics_is_the_scalar_one_bit_for_bit(robot):
             n = first + min(lane, count - 1)
             np.testing.assert_array_equal(poses[:, :, lane].reshape(nb, 3, 4),
                                           expected[n, :, :3, :])
+
+
+def test_the_kept_workspace_is_left_clear_between_calls():
+    """The scoring kernel's z-buffers and spans, kept by the renderer between calls, are
+    all zeros and empty after every call (the kernel clears what it drew, the torso's
+    clipped triangles included), so each call scores as a fresh workspace would."""
+    from drake_tracker.core.likelihood import LikelihoodParams, prepare_observation
+    from drake_tracker.core.renderer import synthetic_observation
+
+    model = build_tracker_model(robot_preset("apollo"))
+    renderer = BatchedDepthRenderer(model, CameraIntrinsics.from_fov(80, 60, np.radians(45)))
+    center = default_view_configuration(model)
+    observation = prepare_observation(synthetic_observation(renderer, center),
+                                      LikelihoodParams())
+    q = random_configurations(model, 2 * LANES + 3, seed=5, spread_rad=0.3, center=center)
+    first = renderer.score(q, observation)
+    zb, span = renderer.workspace(1)[:2]
+    assert not zb.any()
+    assert np.all(span[:, :, 0] == renderer.intrinsics.width) and np.all(span[:, :, 1] == -1)
+    renderer._workspace = None  # a fresh one
+    np.testing.assert_array_equal(renderer.score(q, observation), first)
+    # other batch companions: the same to rounding (the pixels' order of summation)
+    np.testing.assert_allclose(renderer.score(q[::-1], observation), first[::-1], rtol=1e-13)
