@@ -83,13 +83,18 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     world.set_initial_state(context)
-    port_ctx = {}
 
-    def read(port: OutputPort):
-        system = port.get_system()
-        if system not in port_ctx:
-            port_ctx[system] = system.GetMyContextFromRoot(context)
-        return port.Eval(port_ctx[system])
+    def reader(port: OutputPort) -> Callable[[], object]:
+        """``port``'s value in the simulation's context, as a function (the ports and
+        their contexts looked up once, not at each of the 1000 stops a second)."""
+        port_context = port.get_system().GetMyContextFromRoot(context)
+        return lambda: port.Eval(port_context)
+
+    stamp_now, reading_now, bias_now, frame_now = (reader(world.port(name)) for name in (
+        "measurement_time", "measured_position", "true_bias", "depth_frame"))
+    truth_now = {key: reader(world.port(name)) for key, name in (
+        ("q", "true_position"), ("offset", "true_camera_offset"), ("X_CE", "true_X_CE"))}
+    probe_now = {name: reader(port) for name, port in probes.items()}
 
     h = world.encoder_period_s
     reading_grid = np.arange(int(np.floor(duration / h + 1e-9)) + 1) * h
@@ -108,27 +113,27 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     start = time.perf_counter()
     def sample_truth_now(t: float) -> None:
         truth["t"].append(t)
-        truth["q"].append(_as_array(read(world.port("true_position"))))
-        truth["offset"].append(_as_array(read(world.port("true_camera_offset"))))
-        truth["X_CE"].append(_as_array(read(world.port("true_X_CE"))))
-        for name, port in probes.items():
-            extra[name].append(_as_array(read(port)))
+        for key, now in truth_now.items():
+            truth[key].append(_as_array(now()))
+        for name, now in probe_now.items():
+            extra[name].append(_as_array(now()))
 
     bar = SimulatedSecondsBar(duration, enabled=progress)
-    for t, sample_truth in zip(stops, is_truth):
-        bar.advance_to(t)
+    for t, sample_truth in zip(stops.tolist(), is_truth.tolist()):
+        if progress:
+            bar.advance_to(t)
         # The first AdvanceTo(0) also performs the discrete updates at 0 (a dynamic
         # plant steps to time_step_s), so the state at 0 is read before it.
         if sample_truth and t == 0.0:
             sample_truth_now(0.0)
-        simulator.AdvanceTo(float(t))
-        stamp = float(read(world.port("measurement_time"))[0])
+        simulator.AdvanceTo(t)
+        stamp = float(stamp_now()[0])
         if stamp > last_stamp and stamp >= 0 and stamp <= duration + 1e-9:
             last_stamp = stamp
             reading_t.append(stamp)
-            readings.append(np.array(read(world.port("measured_position")), copy=True))
-            biases.append(np.array(read(world.port("true_bias")), copy=True))
-        frame = read(world.port("depth_frame"))
+            readings.append(np.array(reading_now(), copy=True))
+            biases.append(np.array(bias_now(), copy=True))
+        frame = frame_now()
         if frame.sequence != last_seq and not frame.is_empty:
             if frame.sequence != last_seq + 1:
                 raise RuntimeError(f"missed depth images {last_seq + 1}..{frame.sequence - 1}")
@@ -137,7 +142,7 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
             arrivals.append(frame.arrival_time_s)
             images.append(np.array(subsample(frame.depth_m, frame_stride), np.float32))
         if sample_truth and t > 0.0:
-            sample_truth_now(float(t))
+            sample_truth_now(t)
     bar.close()
     wall = time.perf_counter() - start
 
