@@ -1,6 +1,7 @@
 """A stock RgbdSensor feeds AddTracker directly: depth encodings, capture times, sequence
 numbers, the camera model from Drake's types, and tracking through the whole Diagram."""
 
+import copy
 import importlib.util
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from pydrake.systems.sensors import CameraInfo, ImageDepth16U, ImageDepth32F
 
 from drake_tracker import AddTracker, DepthImageToFrame, ImageStamper, TrackerParams
 from drake_tracker.core.camera import CameraIntrinsics, as_intrinsics
-from drake_tracker.core.frames import depth_to_metres
+from drake_tracker.core.frames import DepthFrame, depth_to_metres
 from drake_tracker.robot import build_tracker_model, robot_preset
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "track_in_your_diagram.py"
@@ -75,6 +76,10 @@ def test_a_new_capture_time_makes_a_new_frame_even_an_older_one():
     # applies it at its capture time inside its buffer's horizon.
     late = step(0.15)
     assert (late.sequence, late.capture_time_s) == (2, 0.15)
+    # Only the checks that found a new image changed the state (the others did nothing),
+    # and Drake's copies of the state share the stored frame.
+    assert simulator.get_num_unrestricted_updates() == 3
+    assert copy.deepcopy(late) is late and isinstance(late, DepthFrame)
 
 
 def test_an_image_port_needs_its_capture_time():

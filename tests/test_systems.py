@@ -195,6 +195,11 @@ def test_a_copied_context_shares_the_stored_states_and_neither_sees_the_other(ap
     after = snapshot(simulator.get_context())
     assert snapshot(saved) == before
     assert after[1] > before[1] and after[6] > before[6] and after[11] > before[11]
+    # A check that finds no new frame does nothing (Drake applies no update): per tick
+    # the buffer and the bank, plus one per frame the image update saw.
+    ticks = int(round(0.25 / h)) + 1
+    frames = int(np.sum(run.image_arrival_times_s <= 0.25))
+    assert simulator.get_num_unrestricted_updates() <= 2 * ticks + frames
 
 
 def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, caplog):

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import Context, LeafSystem
+from pydrake.systems.framework import Context, EventStatus, LeafSystem
 
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
@@ -102,12 +102,14 @@ class CpfImageUpdateSystem(LeafSystem):
         """The system's state in ``context`` (counts, health, latest message)."""
         return context.get_abstract_state(self._state).get_value()
 
-    def _update(self, context, state):
-        s = self.state(context).copy()
+    def _update(self, context, state) -> EventStatus | None:
         frame: DepthFrame = self._frame_port.Eval(context)
         key = (frame.sequence, repr(frame.capture_time_s))
-        if frame.is_empty or key == s.last_frame:
-            return
+        if frame.is_empty or key == self.state(context).last_frame:
+            # No new frame (at 999 of 1000 checks): Drake keeps the state as it is and
+            # recomputes nothing that depends on it.
+            return EventStatus.DidNothing()
+        s = self.state(context).copy()
         if frame.sequence < s.last_sequence:
             log.warning("camera sequence counter restarted: image %d after image %d; "
                         "frames are told apart by sequence and stamp", frame.sequence,

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import Context, LeafSystem
+from pydrake.systems.framework import Context, EventStatus, LeafSystem
 
 from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.frames import DepthFrame
@@ -130,13 +130,14 @@ class DelayBufferSystem(LeafSystem):
         """The buffer, its clocks and the latest correction, in ``context``."""
         return context.get_abstract_state(self._state).get_value()
 
-    def _update(self, context, state):
+    def _update(self, context, state) -> EventStatus | None:
         # The stored state is shared with Drake's copies: change a copy of it.
         s = self.state(context).copy()
         # Frames are judged against the buffer the CPF system saw (before this reading).
-        self._judge_frame(self._frame_port.Eval(context), s)
+        changed = self._judge_frame(self._frame_port.Eval(context), s)
         raw = float(self._time_port.Eval(context)[0])
         if s.readings.is_new(raw):
+            changed = True
             reading = np.array(self._reading_port.Eval(context), float)
             s.readings = s.readings.copy()
             t = s.readings.admit(raw, reading)
@@ -154,6 +155,7 @@ class DelayBufferSystem(LeafSystem):
                 s.last_reading_time_s = t
         message = self._observation_port.Eval(context)
         if message.id > s.last_observation_id and message.observation is not None:
+            changed = True
             s.last_observation_id = message.id
             problem = s.buffer.image_time_problem(message.anchor.anchor_time_s) \
                 if s.buffer else "no joint reading yet"
@@ -165,12 +167,16 @@ class DelayBufferSystem(LeafSystem):
                 now, belief = s.buffer.present()
                 s.correction = BeliefCorrection(s.correction.id + 1, now,
                                                 s.last_reading_time_s, belief)
+        if not changed:
+            return EventStatus.DidNothing()  # Drake keeps the state as it is
         state.get_mutable_abstract_state(self._state).set_value(s)
+        return None
 
-    def _judge_frame(self, frame: DepthFrame, s: DelayBufferState) -> None:
-        """Runs a new frame's stamp through the images' clock (once per frame)."""
+    def _judge_frame(self, frame: DepthFrame, s: DelayBufferState) -> bool:
+        """Runs a new frame's stamp through the images' clock (once per frame); whether
+        there was one."""
         if frame.is_empty or s.buffer is None or frame_key(frame) == s.frame_key:
-            return
+            return False
         s.frame_key = frame_key(frame)
         s.image_clock = s.image_clock.copy()
         s.frame_decision = s.image_clock.check(image_time(frame, self._params))
@@ -179,6 +185,7 @@ class DelayBufferSystem(LeafSystem):
         if s.frame_decision.time_s is not None:
             follow_buffer(s.image_clock, s.buffer, s.frame_decision.time_s, log,
                           s.readings.clock)
+        return True
 
     def _calc_correction(self, context, output):
         output.set_value(self.state(context).correction)

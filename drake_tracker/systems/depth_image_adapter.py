@@ -9,11 +9,13 @@ metres or ``ImageDepth16U`` in millimetres) into a ``DepthFrame`` with the next
 sequence number. ``AddTracker`` adds it when given an image port.
 """
 
+from __future__ import annotations
+
 import logging
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import DiagramBuilder, LeafSystem, OutputPort
+from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem, OutputPort
 from pydrake.systems.sensors import ImageDepth16U, ImageDepth32F
 
 from drake_tracker.core.frames import DepthFrame, depth_to_metres
@@ -91,6 +93,15 @@ def AddImageStamper(builder: DiagramBuilder, image: OutputPort, period_s: float,
     return stamper
 
 
+class StoredFrame(DepthFrame):
+    """A :class:`DepthFrame` that is never modified once made, so Drake's copies of the
+    state holding it (at every check, 1000 a simulated second) share it instead of
+    copying a full-resolution image."""
+
+    def __deepcopy__(self, memo) -> StoredFrame:
+        return self
+
+
 class DepthImageToFrame(LeafSystem):
     """Converts each new depth image into a :class:`DepthFrame`: full resolution,
     float32 metres, NaN where the sensor gave no depth.
@@ -125,12 +136,13 @@ class DepthImageToFrame(LeafSystem):
         self.DeclareStateOutputPort("depth_frame", self._frame)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._convert)
 
-    def _convert(self, context, state) -> None:
+    def _convert(self, context, state) -> EventStatus | None:
         stamp = float(self._time_input.Eval(context)[0])
         last: DepthFrame = context.get_abstract_state(self._frame).get_value()
         if not np.isfinite(stamp) or stamp == last.capture_time_s:
-            return
+            return EventStatus.DidNothing()  # Drake keeps the state as it is
         image = self._image_input.Eval(context)
         depth = depth_to_metres(np.asarray(image.data), self._encoding)
-        frame = DepthFrame(stamp, context.get_time(), depth, last.sequence + 1)
+        frame = StoredFrame(stamp, context.get_time(), depth, last.sequence + 1)
         state.get_mutable_abstract_state(self._frame).set_value(frame)
+        return None

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import BasicVector, Context, LeafSystem
+from pydrake.systems.framework import BasicVector, Context, EventStatus, LeafSystem
 
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
@@ -132,22 +132,28 @@ class JointKalmanBankSystem(LeafSystem):
         """The :class:`KalmanBankState` (the abstract state) in ``context``."""
         return context.get_abstract_state(self._bookkeeping).get_value()
 
-    def _update(self, context, state):
+    def _update(self, context, state) -> EventStatus | None:
+        stored = self.bookkeeping(context)
+        correction = self._correction_port.Eval(context)
+        adopt = correction.id > stored.correction_id and correction.belief is not None
+        raw = float(self._time_port.Eval(context)[0])
+        new_reading = self._params.use_joint_readings and stored.gate.is_new(raw)
+        if not (adopt or new_reading):
+            return EventStatus.DidNothing()  # Drake keeps the state as it is
         belief = self.belief(context).copy()
         # The stored bookkeeping is shared with Drake's copies: change a copy of it.
-        s = self.bookkeeping(context).copy()
-        correction = self._correction_port.Eval(context)
-        if correction.id > s.correction_id and correction.belief is not None:
+        s = stored.copy()
+        if adopt:
             belief = correction.belief.copy()
             s.time_s, s.last_reading_s = correction.time_s, correction.last_reading_time_s
             s.correction_id = correction.id
-        raw = float(self._time_port.Eval(context)[0])
-        if self._params.use_joint_readings and s.gate.is_new(raw):
+        if new_reading:
             reading = np.array(self._reading_port.Eval(context), float)
             s.gate = s.gate.copy()
             belief = self._filter(s, s.gate.admit(raw, reading), reading, belief)
         state.get_mutable_discrete_state(self._belief).SetFromVector(belief.ravel())
         state.get_mutable_abstract_state(self._bookkeeping).set_value(s)
+        return None
 
     def _filter(self, s: KalmanBankState, t: float | None, reading: np.ndarray,
                 belief: np.ndarray) -> np.ndarray:
