@@ -13,7 +13,7 @@ copy and reset correctly.
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 from drake_tracker.sim.bias import JointBiasModel
 from drake_tracker.sim.config import EncoderConfig
@@ -35,7 +35,9 @@ class BiasedEncoders(LeafSystem):
     Ports: input ``true_position`` (n); outputs ``measured_position`` (n),
     ``measurement_time`` (1: the time stamp of the latest sample, -1 before any) and
     ``bias`` (n: the noise-free bias of that sample, ground truth).
-    Discrete state: [sample index, sample time, readings (n), bias (n)].
+    Discrete state, four groups: the sample index (-1 before any), and the three outputs
+    (each output port is its group, read without a Python call: the recorder and the
+    tracker read them at every sample).
     """
 
     def __init__(self, joint_names: list[str], config: EncoderConfig, seed: int = 0,
@@ -51,17 +53,14 @@ class BiasedEncoders(LeafSystem):
         self._bias = JointBiasModel(config, self._names, biased)
         self._noise_rad = np.radians(config.noise_sigma_deg)
         self._quant_rad = np.radians(config.quantization_deg)
-        initial = np.zeros(2 + 2 * n)
-        initial[0] = -1.0
-        initial[1] = -1.0
-        self._state = self.DeclareDiscreteState(initial)
+        self._index = self.DeclareDiscreteState([-1.0])
+        self._time = self.DeclareDiscreteState([-1.0])
+        self._reading = self.DeclareDiscreteState(np.zeros(n))
+        self._bias_state = self.DeclareDiscreteState(np.zeros(n))
         self._true_position = self.DeclareVectorInputPort("true_position", n)
-        self.DeclareVectorOutputPort("measured_position", n, self._calc_measured,
-                                     {self.discrete_state_ticket(self._state)})
-        self.DeclareVectorOutputPort("measurement_time", 1, self._calc_time,
-                                     {self.discrete_state_ticket(self._state)})
-        self.DeclareVectorOutputPort("bias", n, self._calc_bias,
-                                     {self.discrete_state_ticket(self._state)})
+        self.DeclareStateOutputPort("measured_position", self._reading)
+        self.DeclareStateOutputPort("measurement_time", self._time)
+        self.DeclareStateOutputPort("bias", self._bias_state)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
 
     @property
@@ -70,27 +69,17 @@ class BiasedEncoders(LeafSystem):
         return list(self._names)
 
     def _update(self, context, discrete_state):
-        x = context.get_discrete_state(self._state).get_value()
+        index = int(round(context.get_discrete_state(self._index).get_value()[0])) + 1
+        previous_t = context.get_discrete_state(self._time).get_value()[0]
+        previous_bias = context.get_discrete_state(self._bias_state).get_value()
         n = self._n
-        index = int(round(x[0])) + 1
         t = context.get_time()
         true_q = self._true_position.Eval(context)
         draws = self._normals(index, 2 * n)
-        dt = max(t - x[1], 0.0) if index > 0 else None
-        bias = self._bias.next(x[2 + n:], t, dt, draws[n:])
+        dt = max(t - previous_t, 0.0) if index > 0 else None
+        bias = self._bias.next(previous_bias, t, dt, draws[n:])
         reading = quantize(true_q + bias + self._noise_rad * draws[:n], self._quant_rad)
-        out = discrete_state.get_mutable_vector(self._state).get_mutable_value()
-        out[0], out[1] = index, t
-        out[2:2 + n] = reading
-        out[2 + n:] = bias
-
-    def _calc_measured(self, context, output: BasicVector):
-        x = context.get_discrete_state(self._state).get_value()
-        output.SetFromVector(x[2:2 + self._n])
-
-    def _calc_time(self, context, output: BasicVector):
-        output.SetAtIndex(0, context.get_discrete_state(self._state).get_value()[1])
-
-    def _calc_bias(self, context, output: BasicVector):
-        x = context.get_discrete_state(self._state).get_value()
-        output.SetFromVector(x[2 + self._n:])
+        discrete_state.get_mutable_vector(self._index).SetAtIndex(0, index)
+        discrete_state.get_mutable_vector(self._time).SetAtIndex(0, t)
+        discrete_state.get_mutable_vector(self._reading).SetFromVector(reading)
+        discrete_state.get_mutable_vector(self._bias_state).SetFromVector(bias)
