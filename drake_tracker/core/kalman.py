@@ -148,7 +148,7 @@ class JointKalmanBank:
         if reading.shape != (self.num_joints,):
             raise ValueError(
                 f"joint reading has shape {reading.shape}, expected ({self.num_joints},)")
-        if not np.all(np.isfinite(reading)):
+        if not np.isfinite(reading).all():
             bad = [self.params.names[i] if self.params.names else str(i)
                    for i in np.flatnonzero(~np.isfinite(reading))]
             raise ValueError(f"joint reading is not finite for joints {bad}")
