@@ -43,6 +43,28 @@ def test_level_of_detail_matches_drake_vtk_on_cad_meshes(model, stride):
     assert np.percentile(diff, 95) <= 0.010, np.percentile(diff, 95)
 
 
+def test_the_likelihood_path_scores_the_images_that_match_drake_vtk(model):
+    """The image update's likelihood path (8 particles at a time, core/lane_render.py)
+    on the CAD robot scores exactly the images compared with RenderEngineVtk above:
+    its scores equal the plain likelihood of those images."""
+    from drake_tracker.core.likelihood import (
+        LikelihoodParams,
+        log_likelihoods,
+        prepare_observation,
+    )
+    from drake_tracker.core.renderer import synthetic_observation
+
+    renderer = BatchedDepthRenderer(model, FULL.subsampled(8))
+    center = default_view_configuration(model)
+    params = LikelihoodParams()
+    observation = prepare_observation(synthetic_observation(renderer, center), params)
+    q = random_configurations(model, 19, seed=4, spread_rad=0.05, center=center)
+    expected = log_likelihoods(renderer.render(q), observation, params)
+    assert np.ptp(expected) > 1.0
+    np.testing.assert_allclose(renderer.score(q, observation), expected, rtol=1e-9,
+                               atol=1e-9)
+
+
 def test_clustered_sphere_stays_within_a_cell_and_keeps_its_culling():
     radius, cell = 0.06, 0.01
     vertices, triangles = sphere_mesh(radius, 96)
