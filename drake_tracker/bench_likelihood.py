@@ -25,11 +25,16 @@ from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
+from numba import njit
 
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import initial_moments
+from drake_tracker.core.lane_kinematics import lane_relative_poses
+from drake_tracker.core.lanes import LANES
+from drake_tracker.core.likelihood import PreparedObservation
 from drake_tracker.core.pipeline import camera_chain_joints
+from drake_tracker.core.render_likelihood import _score_serial
 from drake_tracker.core.renderer import (
     best_wall_and_cpu_time,
     default_view_configuration,
@@ -39,7 +44,6 @@ from drake_tracker.core.renderer import (
 from drake_tracker.params import TrackerParams, resolve_blocks
 
 if TYPE_CHECKING:
-    from drake_tracker.core.likelihood import PreparedObservation
     from drake_tracker.robot import TrackerModel
 
 
@@ -166,35 +170,63 @@ def cpf_configurations(update: CpfImageUpdate, observation: PreparedObservation,
     return recorder.calls
 
 
-def _stages(update: CpfImageUpdate, observation, prior, repeats: int) -> dict:
-    """µs per evaluation of each stage, on the configurations of one image update (block
-    call by block call), 1 thread, CPU time: ``fk`` (the batched FK call alone),
-    ``raster`` (the fused kernel against an image with a single valid pixel, away from
-    the robot: FK, rasterising and the pixel scan, minus ``fk``), ``likelihood``
-    (``score`` minus that), ``score`` (the fused kernel as the filter runs it), and
-    ``render`` (FK excluded, images written to memory)."""
+@njit(cache=True)
+def _replay_scores(chunks, head, tail, out):
+    """The scoring kernel on each chunk of configurations, as the compiled sweeps call
+    it (from numba: no Python dispatch per call)."""
+    for q in chunks:
+        _score_serial(q, *head, 1, *tail, out[:q.shape[0]])
+
+
+@njit(cache=True)
+def _replay_kinematics(chunks, frame_tables, world, poses, work):
+    """The scoring kernel's forward kinematics alone on each chunk, LANES at a time."""
+    for q in chunks:
+        for first in range(0, q.shape[0], LANES):
+            lane_relative_poses(q, first, min(LANES, q.shape[0] - first), *frame_tables,
+                                world, poses, work)
+
+
+def _stages(update: CpfImageUpdate, observation: PreparedObservation, prior: np.ndarray,
+            repeats: int) -> dict:
+    """µs per evaluation of each stage, on the configurations one image update scores
+    (block call by block call, called from numba as the compiled sweeps do), 1 thread,
+    CPU time: ``fk`` (the kernel's forward kinematics alone), ``raster`` (the kernel
+    against an image with a single valid pixel, away from the robot: FK, culling,
+    rasterising and the pixel scan, minus ``fk``), ``likelihood`` (``score`` minus that),
+    ``score`` (the kernel as the filter runs it), and ``render`` (the scalar rasteriser's
+    images written to memory, FK excluded)."""
+    from numba.typed import List
+
+    from drake_tracker.core.cpf_compiled import CompiledLikelihood
     from drake_tracker.core.likelihood import prepare_observation
 
     renderer = update.renderer
-    chunks = cpf_configurations(update, observation, prior)
-    evaluations = sum(len(c) for c in chunks)
-    frame = renderer.model.camera_frame
-    poses = [renderer.kinematics.relative_poses(c, frame) for c in chunks]
+    configurations = cpf_configurations(update, observation, prior)
+    chunks = List(np.ascontiguousarray(c) for c in configurations)
+    evaluations = sum(len(c) for c in configurations)
     one_pixel = np.full(observation.shape, np.nan, dtype=np.float32)
     one_pixel[0, 0] = 1.0
     nearly_empty = prepare_observation(one_pixel, update.likelihood)
+    out = np.zeros(max(len(c) for c in configurations))
+    nb = renderer.kinematics.num_bodies
+    world, poses, work = np.zeros(nb * 12 * LANES), np.zeros((nb, 12, LANES)), np.zeros(
+        3 * 12 * LANES)
 
-    def each(fn, items):
-        return lambda: [fn(x) for x in items]
+    def kernel(o):
+        head, tail = CompiledLikelihood(renderer, o).kernel_arguments(len(out))
+        return lambda: _replay_scores(chunks, head, tail, out)
 
-    def cpu(fn, items):
-        fn(items[0])
-        return best_wall_and_cpu_time(each(fn, items), repeats)[1] * 1e6 / evaluations
+    def cpu(fn):
+        fn()
+        return best_wall_and_cpu_time(fn, repeats)[1] * 1e6 / evaluations
 
-    fk = cpu(lambda c: renderer.kinematics.relative_poses(c, frame), chunks)
-    fk_raster = cpu(lambda c: renderer.score(c, nearly_empty), chunks)
-    score = cpu(lambda c: renderer.score(c, observation), chunks)
-    render = cpu(renderer.render_camera_poses, poses)
+    fk = cpu(lambda: _replay_kinematics(chunks, renderer._frame_tables, world, poses, work))
+    fk_raster = cpu(kernel(nearly_empty))
+    score = cpu(kernel(observation))
+    frame = renderer.model.camera_frame
+    camera_poses = [renderer.kinematics.relative_poses(c, frame) for c in configurations]
+    render = cpu(lambda: [renderer.render_camera_poses(p) for p in camera_poses])
     return {"fk": fk, "raster": max(0.0, fk_raster - fk),
             "likelihood": max(0.0, score - fk_raster), "score": score, "render": render}
 
