@@ -217,16 +217,21 @@ def _stages(update: CpfImageUpdate, observation: PreparedObservation, prior: np.
         head, tail = CompiledLikelihood(renderer, o).kernel_arguments(len(out))
         return lambda: _replay_scores(chunks, head, tail, out)
 
-    def cpu(fn):
-        fn()
-        return best_wall_and_cpu_time(fn, repeats)[1] * 1e6 / evaluations
-
-    fk = cpu(lambda: _replay_kinematics(chunks, renderer._frame_tables, world, poses, work))
-    fk_raster = cpu(kernel(nearly_empty))
-    score = cpu(kernel(observation))
     frame = renderer.model.camera_frame
     camera_poses = [renderer.kinematics.relative_poses(c, frame) for c in configurations]
-    render = cpu(lambda: [renderer.render_camera_poses(p) for p in camera_poses])
+    runs = [lambda: _replay_kinematics(chunks, renderer._frame_tables, world, poses, work),
+            kernel(nearly_empty), kernel(observation),
+            lambda: [renderer.render_camera_poses(p) for p in camera_poses]]
+    for fn in runs:
+        fn()
+    # The stages in turn, round after round, each the least of its rounds: the
+    # differences below then compare runs made under the same load (timed one stage
+    # after the other, a load change between them gave raster > score on the CAD robot).
+    best = np.full(len(runs), np.inf)
+    for _ in range(max(1, 2 * repeats)):
+        for i, fn in enumerate(runs):
+            best[i] = min(best[i], best_wall_and_cpu_time(fn, 1)[1])
+    fk, fk_raster, score, render = (float(b) * 1e6 / evaluations for b in best)
     return {"fk": fk, "raster": max(0.0, fk_raster - fk),
             "likelihood": max(0.0, score - fk_raster), "score": score, "render": render}
 
