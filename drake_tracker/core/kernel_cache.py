@@ -14,6 +14,7 @@ was filled. A cache elsewhere (numba's fallback for an unwritable package folder
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 _FOLDER = Path(__file__).resolve().parent
@@ -43,7 +44,11 @@ def clear_stale_kernel_cache(folder: Path = _FOLDER) -> bool:
         for path in stale:
             path.unlink(missing_ok=True)
         cache.mkdir(exist_ok=True)
-        stamp.write_text(current)
+        # Atomic: processes that import the package together (a pool's workers) must
+        # never read a half-written stamp, which would empty a cache another just filled.
+        partial = cache / f"{_STAMP}.{os.getpid()}"
+        partial.write_text(current)
+        os.replace(partial, stamp)
         return bool(stale)
     except OSError:
         return False
