@@ -16,6 +16,7 @@ from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
 from drake_tracker.core.timestamps import RateLimitedWarning, problem_kind
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
+from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
     from drake_tracker.robot import TrackerModel
@@ -24,7 +25,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass
-class CpfState:
+class CpfState(SharedAbstractState):
     """The system's abstract state. A stored one is never modified (``_update`` changes a
     ``copy()`` of it and stores that, and every field is replaced, never mutated), so
     Drake's copies of it, two at every update (1000 a simulated second), share it."""
@@ -40,15 +41,6 @@ class CpfState:
     #: Frames not processed: not due (paced at ``min_image_interval_s``), unplaceable,
     #: malformed, or replaced on the port before the system looked.
     images_skipped: int = 0
-
-    def __deepcopy__(self, memo) -> CpfState:
-        return self
-
-    def copy(self) -> CpfState:
-        """A shallow copy: an update's own, whose fields it replaces."""
-        clone = object.__new__(CpfState)
-        clone.__dict__.update(self.__dict__)
-        return clone
 
 
 class CpfImageUpdateSystem(LeafSystem):

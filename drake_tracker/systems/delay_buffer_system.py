@@ -28,6 +28,7 @@ from drake_tracker.core.timestamps import (
 )
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
+from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
     from drake_tracker.robot import TrackerModel
@@ -36,7 +37,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass
-class DelayBufferState:
+class DelayBufferState(SharedAbstractState):
     """The system's abstract state. A stored one is never modified: ``_update`` works on
     a ``copy()`` of it and copies each part it changes (the buffer, a clock) before
     changing it, so Drake's two copies of the state at every update (1000 a simulated
@@ -52,15 +53,6 @@ class DelayBufferState:
     image_clock: StreamClock | None = None
     frame_key: tuple = ()
     frame_decision: StampDecision | None = None
-
-    def __deepcopy__(self, memo) -> DelayBufferState:
-        return self
-
-    def copy(self) -> DelayBufferState:
-        """A shallow copy: an update's own, whose parts it replaces before changing."""
-        clone = object.__new__(DelayBufferState)
-        clone.__dict__.update(self.__dict__)
-        return clone
 
 
 def frame_key(frame: DepthFrame) -> tuple:

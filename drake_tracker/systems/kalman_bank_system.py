@@ -17,6 +17,7 @@ from drake_tracker.core.pipeline import full_reading, make_bank_and_prior, robot
 from drake_tracker.core.timestamps import ReadingGate
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
+from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
     from drake_tracker.robot import TrackerModel
@@ -25,7 +26,7 @@ log = logging.getLogger(__name__)
 
 
 @dataclass
-class KalmanBankState:
+class KalmanBankState(SharedAbstractState):
     """The bank system's bookkeeping (its abstract state); the belief itself is the
     discrete state ``belief``. ``time_s``/``last_reading_s`` are None before the first
     reading; ``correction_id`` is the latest delay-buffer correction adopted. A stored
@@ -36,15 +37,6 @@ class KalmanBankState:
     time_s: float | None = None
     last_reading_s: float | None = None
     correction_id: int = 0
-
-    def __deepcopy__(self, memo) -> KalmanBankState:
-        return self
-
-    def copy(self) -> KalmanBankState:
-        """A shallow copy: an update's own, whose gate it replaces before changing."""
-        clone = object.__new__(KalmanBankState)
-        clone.__dict__.update(self.__dict__)
-        return clone
 
 
 class JointKalmanBankSystem(LeafSystem):
