@@ -1,7 +1,7 @@
 """Replays one protocol task's recorded run through the offline ``Tracker`` as the
 protocol's full-fusion method does, and prints, for the images in a time window, the
 hand error against the truth, the health state with the latest image's consistency,
-whether a challenger is searching, the camera offset and the arm biases.
+whether a challenger is searching, the camera offset, and the arm's biases and angles.
 
 It is how the protocol's lost seeds are read: for example the run in which a bias step
 at 50 s left joint 4's bias estimate at 119 degrees for 10 s while the health said
@@ -61,7 +61,8 @@ def trace(run: RecordedRun, seed: int, from_s: float, to_s: float, every_s: floa
             print(f"{captured:7.2f} s  error {error_mm:6.0f} mm  {health.state.name}  "
                   f"{consistency}  challenger {health.challenger is not None}  "
                   f"camera {np.round(estimate.positions[virtual], 3)}  "
-                  f"bias deg {np.round(np.degrees(estimate.biases[arm]), 1)}", flush=True)
+                  f"bias deg {np.round(np.degrees(estimate.biases[arm]), 1)}  "
+                  f"angle deg {np.round(np.degrees(estimate.positions[arm]), 1)}", flush=True)
         tracker.add_reading(float(t), run.readings_rad[k])
 
 
