@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -72,9 +73,13 @@ def model_for_run(run: RecordedRun) -> TrackerModel:
 def replay_run(run: RecordedRun, params: TrackerParams | None = None,
                model: TrackerModel | None = None,
                sample_times_s: np.ndarray | None = None,
-               progress: bool = False) -> ReplayResult:
+               progress: bool = False,
+               on_image: Callable[[Tracker, DepthFrame], None] | None = None
+               ) -> ReplayResult:
     """Replays ``run`` through a fresh :class:`Tracker` and samples its estimates;
-    ``progress`` shows a bar of the images fed (stderr)."""
+    ``progress`` shows a bar of the images fed (stderr); ``on_image(tracker, frame)`` is
+    called after each image the tracker accepted (to trace it; an exception it raises
+    ends the replay and reaches the caller)."""
     model = model if model is not None else model_for_run(run)
     if list(run.joint_names) != list(model.robot_joint_names):
         raise ValueError(f"the run's joints {run.joint_names} differ from the model's "
@@ -108,14 +113,18 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
                and run.image_arrival_times_s[image_order[next_image]] < t):
             i = image_order[next_image]
             sample_until(run.image_arrival_times_s[i])
+            frame = DepthFrame(float(run.image_capture_times_s[i]),
+                               float(run.image_arrival_times_s[i]), run.depth_images_m[i],
+                               int(i))
             try:
-                tracker.add_image(DepthFrame(float(run.image_capture_times_s[i]),
-                                             float(run.image_arrival_times_s[i]),
-                                             run.depth_images_m[i], int(i)))
+                tracker.add_image(frame)
             except ValueError as err:
                 skipped_images += 1
                 warnings.warn("unusable images", f"image {i} captured at "
                               f"{run.image_capture_times_s[i]:.4f} s skipped: {err}")
+            else:
+                if on_image is not None:
+                    on_image(tracker, frame)
             next_image += 1
             bar.update(1)
         sample_until(t)

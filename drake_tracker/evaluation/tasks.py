@@ -140,6 +140,19 @@ def _sample_times(run, period_s: float) -> np.ndarray:
     return np.arange(start, run.truth_times_s[-1] + 1e-9, period_s)
 
 
+def protocol_params(run: RecordedRun, method: str, min_image_interval_s: float,
+                    base_params: TrackerParams | None = None,
+                    tracker_seed: int = 0) -> TrackerParams:
+    """The parameters the protocol replays ``run`` with for ``method``: the method's
+    (``methods.method_params``), started at the run's first true configuration, images
+    paced at ``min_image_interval_s``, and ``tracker_seed`` added to ``image.seed``."""
+    initial = {n: float(q) for n, q in zip(run.joint_names, run.truth_positions_rad[0])}
+    params = method_params(method, base_params, initial_positions_rad=initial)
+    params.image.min_image_interval_s = min_image_interval_s
+    params.image.seed += int(tracker_seed)
+    return params
+
+
 def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s: float = 0.0,
                  sample_period_s: float = SAMPLE_PERIOD_S,
                  base_params: TrackerParams | None = None,
@@ -159,7 +172,6 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
                           len(run.truth_times_s) - 1)
     X_true = run.truth_X_CE[truth_index]
     out = {}
-    initial = {n: float(q) for n, q in zip(run.joint_names, run.truth_positions_rad[0])}
     methods = list(methods)
     for k, method in enumerate(methods, 1):
         if report:
@@ -168,9 +180,8 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
         if method == "encoders_only":
             X = encoders_only_X_CE(run, model)[truth_index]
         else:
-            params = method_params(method, base_params, initial_positions_rad=initial)
-            params.image.min_image_interval_s = min_image_interval_s
-            params.image.seed += int(tracker_seed)
+            params = protocol_params(run, method, min_image_interval_s, base_params,
+                                     tracker_seed)
             X = replay_run(run, params, model, sample_times_s=times).X_CE
         if wall_s is not None:
             wall_s[method] = time.perf_counter() - start
