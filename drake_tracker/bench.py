@@ -39,7 +39,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer
+from drake_tracker.core.angle_observation import AngleObservation
+from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.image_update import CpfImageUpdate
 from drake_tracker.core.kalman import VAR_A, JointKalmanBank, initial_moments

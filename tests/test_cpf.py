@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from drake_tracker.core.belief_buffer import AngleObservation
+from drake_tracker.core.angle_observation import AngleObservation
 from drake_tracker.core.cpf import (
     annealed_coordinate_particle_filter,
     coordinate_particle_filter,

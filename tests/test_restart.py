@@ -14,7 +14,7 @@ import pytest
 from fast_params import small_params
 from test_timestamps import assert_same_when_settled, feed, simulate
 
-from drake_tracker.core.belief_buffer import AngleObservation, Restart
+from drake_tracker.core.angle_observation import AngleObservation, Restart
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.frames import DepthFrame

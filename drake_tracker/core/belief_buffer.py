@@ -16,7 +16,8 @@ An image update is kept in the buffer as a per-joint Gaussian pseudo-observation
 angles in information form (``precision``, ``information``), the likelihood implied by
 the CPF's moment-matched marginals relative to the prior they came from. Applying it to
 that same prior gives back exactly eq. (16); replaying it after an earlier delayed image
-(out-of-order images) stays linear-Gaussian and cheap, with no second CPF run.
+(out-of-order images) stays linear-Gaussian and cheap, with no second CPF run
+(``core/angle_observation.py``).
 """
 
 from __future__ import annotations
@@ -28,99 +29,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.core.kalman import (
-    MEAN_A,
-    MEAN_B,
-    VAR_A,
-    VAR_B,
-    JointKalmanBank,
-    recombine_with_bias,
-)
+from drake_tracker.core.angle_observation import AngleObservation
+from drake_tracker.core.kalman import MEAN_A, JointKalmanBank
 
 log = logging.getLogger(__name__)
 
 
 class StaleReadingError(ValueError):
     """A joint reading whose time stamp is not after the previous reading's."""
-
-
-@dataclass(frozen=True)
-class Restart:
-    """Forgets a belief that the images showed wrong: each joint's angle goes to where
-    the encoders put it with the bias mean added back (``a + b``: for a robot joint, its
-    reading's angle at zero bias; a virtual joint keeps its mean), the bias to 0, and the
-    variances to ``angle_var`` and ``bias_var`` (the tracker's start). Commutes with a
-    shift of the angles, so it can be stored at an image's anchor."""
-
-    angle_var: np.ndarray
-    bias_var: np.ndarray
-
-    def apply(self, prior: np.ndarray) -> np.ndarray:
-        """The restarted (5, n) belief: angle means ``a + b`` of ``prior``, bias means and
-        angle-bias covariances 0, variances ``angle_var`` and ``bias_var``."""
-        restarted = np.zeros_like(prior)
-        restarted[MEAN_A] = prior[MEAN_A] + prior[MEAN_B]
-        restarted[VAR_A] = self.angle_var
-        restarted[VAR_B] = self.bias_var
-        return restarted
-
-
-@dataclass(frozen=True)
-class AngleObservation:
-    """A Gaussian pseudo-observation of the joint angles, in information form.
-
-    Applied to a prior with angle marginal (μ, S): posterior precision ``1/S + precision``
-    and posterior information ``μ/S + information``; the bias follows by eq. (16). With a
-    ``restart``, the prior is first replaced by ``restart.apply(prior)``.
-    """
-
-    precision: np.ndarray
-    information: np.ndarray
-    restart: Restart | None = None
-
-    @staticmethod
-    def from_posterior(prior: np.ndarray, mean_post: np.ndarray,
-                       var_post: np.ndarray) -> AngleObservation:
-        """The observation that turns ``prior`` (5, n) into angle marginals (mean, var).
-
-        Where the posterior is not tighter than the prior, the observation carries no
-        precision and only shifts the mean.
-        """
-        s_prior = prior[VAR_A]
-        mu_prior = prior[MEAN_A]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            precision = 1.0 / var_post - 1.0 / s_prior
-            tighter = np.isfinite(precision) & (precision > 0)
-            information = np.where(
-                tighter,
-                mean_post / var_post - mu_prior / s_prior,
-                np.where(s_prior > 0, (mean_post - mu_prior) / s_prior, 0.0),
-            )
-        precision = np.where(tighter, precision, 0.0)
-        return AngleObservation(precision, information)
-
-    def shifted(self, angle_shift: np.ndarray) -> AngleObservation:
-        """The same observation of ``a + angle_shift`` expressed as one of ``a``.
-
-        exp(-P (a + Δ)²/2 + I (a + Δ)) ∝ exp(-P a²/2 + (I - P Δ) a).
-        """
-        return AngleObservation(self.precision, self.information - self.precision * angle_shift,
-                                self.restart)
-
-    def apply(self, prior: np.ndarray) -> np.ndarray:
-        """The (5, n) posterior of ``prior`` (restarted first when ``restart`` is set): angle
-        marginals from the summed precision and information, the bias through eq. (16)."""
-        if self.restart is not None:
-            prior = self.restart.apply(prior)
-        s_prior = prior[VAR_A]
-        safe = s_prior > 0
-        inv_s = np.where(safe, 1.0 / np.where(safe, s_prior, 1.0), 0.0)
-        post_precision = inv_s + self.precision
-        has_info = post_precision > 0
-        var_post = np.where(has_info, 1.0 / np.where(has_info, post_precision, 1.0), s_prior)
-        mean_post = np.where(
-            has_info, var_post * (prior[MEAN_A] * inv_s + self.information), prior[MEAN_A])
-        return recombine_with_bias(prior, mean_post, var_post)
 
 
 @dataclass

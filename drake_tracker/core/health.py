@@ -184,6 +184,9 @@ class Challenger:
     offset_var: np.ndarray
     time_s: float
     images: int = 0
+    #: (n,) the camera offset it searches from, the estimate's at its start (virtual
+    #: joints; NaN elsewhere: ``Restart.pinned_angle``).
+    pinned_angle: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import AngleObservation, BeliefBuffer, Restart
+from drake_tracker.core.angle_observation import AngleObservation, Restart
+from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.cpf import CPFResult
 from drake_tracker.core.depth_units import check_depth_units
@@ -124,7 +125,8 @@ class ImageProcessor:
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
             tuple(im.annealing_betas), tuple(im.sweep_image_widths_px))
         self.search = EncoderSearch(self.update, params, self._occlusion_aware, noise,
-                                    np.isin(model.joint_names, model.robot_joint_names))
+                                    np.isin(model.joint_names, model.robot_joint_names),
+                                    self.restart)
 
     def image_time(self, frame: DepthFrame) -> float:
         """The time t' (s) ``frame`` is applied at: :func:`image_time` with these parameters."""
@@ -192,8 +194,9 @@ class ImageProcessor:
         # Never lost for good: the belief restarts from the encoders (as at the tracker's
         # start: see ``restart_reason``) before the update.
         restarted, misplaced = False, False
+        restart = self.restart  # a forced restart: to the tracker's start, nominal camera
         if self.params.use_joint_readings:
-            candidate = self.restart.apply(prior)
+            candidate = restart.apply(prior)
             rendered_enc = self.update.renderer.render(candidate[MEAN_A][None])[0]
             encoders = image_consistency(predicted.time_s, rendered_enc, observed,
                                          image.likelihood)
@@ -243,19 +246,19 @@ class ImageProcessor:
         if self.params.use_joint_readings and not restarted and (
                 is_reacquiring(health, predicted, self.params.health) if not acquired
                 else is_surprising(predicted, self.params.health, health.latest)):
-            alternative = self.search.second_opinion(plain, candidate, rendered_enc,
-                                                     encoders, result, rng, frame.sequence)
-            if alternative is not None:
-                restarted, misplaced, prior, result = True, False, candidate, alternative
+            overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
+                                                  rng, frame.sequence)
+        else:
+            overrule = None
         # While the estimate's biases are implausible, a challenger belief searches from
         # the encoders' arm over several images (see core/second_opinion.py).
         challenger = None
-        if self.params.use_joint_readings and not restarted:
-            alternative, challenger = self.search.challenge(
-                plain, prior, candidate, result, health.challenger, predicted.time_s, rng,
-                frame.sequence)
-            if alternative is not None:
-                restarted, misplaced, prior, result = True, False, candidate, alternative
+        if self.params.use_joint_readings and not restarted and overrule is None:
+            overrule, challenger = self.search.challenge(plain, prior, result, health,
+                                                         predicted.time_s, rng, frame.sequence)
+        if overrule is not None:
+            restarted, misplaced = True, False
+            prior, result, restart = overrule.prior, overrule.result, overrule.restart
         # A degenerate particle set would claim certainty; floor the posterior variance
         # at the Monte-Carlo resolution of the prior.
         floor = np.maximum(prior[VAR_A] / self.update.num_particles, 1e-14)
@@ -266,7 +269,7 @@ class ImageProcessor:
         else:
             observation = AngleObservation.from_posterior(prior, result.mean, variance)
         if restarted:
-            observation = replace(observation, restart=self.restart)
+            observation = replace(observation, restart=restart)
         return ImageOutcome(observation, result, predicted, restarted, misplaced,
                             challenger=challenger)
 

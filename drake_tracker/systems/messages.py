@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import AngleObservation, ImageAnchor
+from drake_tracker.core.angle_observation import AngleObservation
+from drake_tracker.core.belief_buffer import ImageAnchor
 
 
 @dataclass
