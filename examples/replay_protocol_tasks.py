@@ -15,13 +15,12 @@ It is how a tracker change is checked against the protocol without re-running it
 from __future__ import annotations
 
 import argparse
-import csv
-import gzip
 import time
 from pathlib import Path
 
 import numpy as np
 
+from drake_tracker.evaluation.results import ResultStore
 from drake_tracker.evaluation.tasks import (
     QUICK_IMAGE_INTERVAL_S,
     SAMPLE_PERIOD_S,
@@ -41,10 +40,9 @@ def figures(times_s: np.ndarray, error_mm: np.ndarray) -> str:
     return f"{p50:.1f} / {p75:.1f} / {p99:.1f} mm, {SAMPLE_PERIOD_S * np.sum(e > FAR_MM):.1f} s"
 
 
-def stored_full_fusion(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(times, translation errors) of full fusion in a task's stored result."""
-    with gzip.open(path, "rt") as f:
-        rows = [r for r in csv.DictReader(f) if r["method"] == "full_fusion"]
+def stored_full_fusion(store: ResultStore, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(times, translation errors) of full fusion in task ``name``'s stored result."""
+    rows = [r for r in store.read_errors(name) if r["method"] == "full_fusion"]
     return (np.array([float(r["time_s"]) for r in rows]),
             np.array([float(r["translation_mm"]) for r in rows]))
 
@@ -59,9 +57,10 @@ def main() -> None:
 
     numba.set_num_threads(1)
     root = Path(args.out)
+    store = ResultStore(root)
     for name in args.tasks:
         seed = int(name.rsplit("seed", 1)[1])
-        before = figures(*stored_full_fusion(root / "results" / f"{name}.csv.gz"))
+        before = figures(*stored_full_fusion(store, name))
         start = time.perf_counter()
         run = RecordedRun.load(root / "runs" / f"{name}.npz")
         now = evaluate_run(run, ["full_fusion"], QUICK_IMAGE_INTERVAL_S,

@@ -2,24 +2,13 @@
 callback sees every accepted image and changes nothing; the trace prints one line per
 image in its window, naming the joints it reports."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
+from example_modules import load_example
 
 from drake_tracker.evaluation.tasks import protocol_params
 from drake_tracker.offline import replay_run
 from drake_tracker.recording import RecordedRun
 from drake_tracker.synthetic import synthetic_run
-
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "health_trace.py"
-
-
-def load_example():
-    spec = importlib.util.spec_from_file_location("health_trace", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_the_image_callback_sees_every_image_and_changes_no_estimate(apollo):
@@ -44,8 +33,9 @@ def test_the_health_trace_prints_each_image_of_its_window(apollo, tmp_path):
     path = tmp_path / "run.npz"
     synthetic_run(apollo, duration_s=0.8, seed=1).save(path)
     run = RecordedRun.load(path)
-    lines = load_example().trace_lines(run, seed=1, from_s=0.3, to_s=0.6, every_s=0.0,
-                                       min_image_interval_s=0.1)
+    trace = load_example("health_trace.py")
+    lines = trace.trace_lines(run, seed=1, from_s=0.3, to_s=0.6, every_s=0.0,
+                              min_image_interval_s=0.1)
     for name in apollo.robot_joint_names:
         assert name in lines[0]
     captured = run.image_capture_times_s

@@ -2,11 +2,10 @@
 numbers, the camera model from Drake's types, and tracking through the whole Diagram."""
 
 import copy
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
+from example_modules import load_example
 from pydrake.geometry import ClippingRange, DepthRange, DepthRenderCamera, RenderCameraCore
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
@@ -18,15 +17,6 @@ from drake_tracker import AddTracker, DepthImageToFrame, ImageStamper, TrackerPa
 from drake_tracker.core.camera import CameraIntrinsics, as_intrinsics
 from drake_tracker.core.frames import DepthFrame, depth_to_metres
 from drake_tracker.robot import build_tracker_model, robot_preset
-
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "track_in_your_diagram.py"
-
-
-def load_example():
-    spec = importlib.util.spec_from_file_location("track_in_your_diagram", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_depth_encodings_convert_to_metres_with_nan_for_invalid():
@@ -96,7 +86,7 @@ def test_an_image_port_needs_its_capture_time():
 
 @pytest.mark.parametrize("depth", ["32F", "16U"])
 def test_stock_rgbd_sensor_tracks_a_biased_robot_ten_times_better_than_encoders(depth):
-    example = load_example()
+    example = load_example("track_in_your_diagram.py")
     demo = example.build(depth, duration_s=4.0, seed=3)
     assert demo.tracker.depth_adapter is not None
     errors = example.hand_errors_mm(demo, np.array([1.0, 3.0, 3.5, 4.0]))

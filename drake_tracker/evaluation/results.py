@@ -60,6 +60,15 @@ class ResultStore:
                 return path
         return None
 
+    def read_errors(self, name: str) -> list[dict]:
+        """The stored error samples of task ``name`` (rows of its errors CSV); raises
+        FileNotFoundError naming the folder when the task has none."""
+        path = self.stored_errors(name)
+        if path is None:
+            raise FileNotFoundError(f"no stored errors of task '{name}' in "
+                                    f"{self.results_dir}")
+        return _read_errors(path)
+
     def is_done(self, task: Task) -> bool:
         """Whether ``task``'s errors file exists (a resumed evaluation skips it)."""
         return self.stored_errors(task.name) is not None
@@ -80,7 +89,7 @@ class ResultStore:
             names &= {t.name for t in tasks}
         rows = []
         for name in sorted(names):
-            rows.extend(_read_errors(self.stored_errors(name)))
+            rows.extend(self.read_errors(name))
         return rows
 
     def load_metas(self, tasks: list[Task]) -> list[dict]:
