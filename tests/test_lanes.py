@@ -1,5 +1,5 @@
-"""SIMD across particles (core/lanes.py, lane_render.py, simd_ir.py) against plain
-references: libm's exp, log and erfc, and the scalar rasteriser's images."""
+"""SIMD across particles (core/lanes.py, lane_render.py, simd_ir.py, simd_f32.py) against
+plain references: libm's exp, log and erfc, and the scalar rasteriser's images."""
 
 import math
 
@@ -8,7 +8,7 @@ import pytest
 from numba import njit, types
 from numba.extending import intrinsic
 
-from drake_tracker.core import simd_ir
+from drake_tracker.core import simd_f32
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.lane_render import lane_scratch, render_lanes
 from drake_tracker.core.lanes import LANES
@@ -17,68 +17,70 @@ from drake_tracker.core.renderer import default_view_configuration, random_confi
 from drake_tracker.robot import build_tracker_model, robot_preset
 
 
-def _vector_map(emit):
-    """A numba function out[i:i+4] = emit(x[i:i+4]) over arrays of a multiple of 4."""
-
+def _vector_map_f32(emit):
+    """A numba function out[i:i+8] = emit(x[i:i+8]) in float32 over float32 arrays of a
+    multiple of 8."""
     @intrinsic
     def apply(typingctx, x, out, i):
         def codegen(context, b, signature, args):
             x_d = context.make_array(signature.args[0])(context, b, args[0]).data
             o_d = context.make_array(signature.args[1])(context, b, args[1]).data
-            value = emit(b, [simd_ir.load(b, x_d, args[2])])[0]
-            simd_ir.store(b, value, o_d, args[2])
+            ptr_type = simd_f32.VEC_F32.as_pointer()
+            value = b.load(b.bitcast(b.gep(x_d, [args[2]]), ptr_type), align=4)
+            b.store(emit(b, [value])[0], b.bitcast(b.gep(o_d, [args[2]]), ptr_type),
+                    align=4)
             return context.get_dummy_value()
 
         return types.void(x, out, i), codegen
 
     @njit
     def run(x, out):
-        for i in range(0, x.shape[0], simd_ir.WIDTH):
+        for i in range(0, x.shape[0], simd_f32.WIDTH_F32):
             apply(x, out, i)
 
     def call(x):
-        x = np.ascontiguousarray(x, dtype=np.float64)
+        x = np.ascontiguousarray(x, dtype=np.float32)
         out = np.empty_like(x)
         run(x, out)
-        return out
+        return out.astype(np.float64), x.astype(np.float64)
 
     return call
 
 
-def test_vector_exp_log_erfc_against_libm():
-    rng = np.random.default_rng(0)
-    x = np.concatenate([rng.uniform(-700, 700, 4000), rng.uniform(-5, 5, 4000),
-                        [0.0, -0.0, 1e-300, 700.0, -700.0, 0.5 * math.log(2.0), 1.0, -1.0]])
-    expected = np.array([math.exp(v) for v in x])
-    # relative error below 1e-14 (Taylor to degree 11 on |r| <= ln2/2: 8.8e-15)
-    np.testing.assert_allclose(_vector_map(simd_ir.exp)(x), expected, rtol=1e-14, atol=0)
-    # clamped to [-700, 700]
-    np.testing.assert_allclose(_vector_map(simd_ir.exp)(np.array([-800.0, 800.0] * 2)),
-                               [math.exp(-700), math.exp(700)] * 2, rtol=1e-14)
-    y = np.concatenate([np.exp(rng.uniform(-700, 700, 4000)), rng.uniform(0.5, 2.0, 4000),
-                        [1.0, math.sqrt(0.5), math.sqrt(2.0), 2.0 ** -1022, 1.7e308, 3.0,
-                         0.1, 7.0]])
-    expected = np.array([math.log(v) for v in y])
-    error = np.abs(_vector_map(simd_ir.log)(y) - expected) / np.maximum(1.0, np.abs(expected))
-    assert error.max() < 1e-15  # a few ulps, relative to max(1, |log y|)
-    x = np.concatenate([rng.uniform(-6.0, simd_ir.ERFC_Y_MAX, 8000),
-                        [0.0, -0.0, 1e-9, -1e-9, 9.5, -9.5, 3.0, -3.0]])
+def test_float32_exp_log_erfc_against_libm():
+    """The float32 lanes' exp, log and erfc (the pixel likelihood's mixture) within a
+    few float32 ulps of libm's double-precision values of the same float32 arguments."""
+    rng = np.random.default_rng(1)
+    limit = simd_f32.EXP_LIMIT_F32
+    x = np.concatenate([rng.uniform(-limit, limit, 4000), rng.uniform(-5, 5, 3992),
+                        [0.0, -0.0, 1e-30, limit, -limit, 0.5 * math.log(2.0), 1.0, -1.0]])
+    got, x = _vector_map_f32(simd_f32.exp_f32)(x)
+    np.testing.assert_allclose(got, np.exp(x), rtol=1e-6, atol=0)
+    got, _ = _vector_map_f32(simd_f32.exp_f32)(np.array([-200.0, 200.0] * 4))
+    np.testing.assert_allclose(got, [math.exp(-limit), math.exp(limit)] * 4, rtol=1e-6)
+    y = np.concatenate([np.exp(rng.uniform(-80, 80, 4000)), rng.uniform(0.5, 2.0, 3992),
+                        [1.0, math.sqrt(0.5), math.sqrt(2.0), 1.2e-38, 3e38, 3.0, 0.1, 7.0]])
+    got, y = _vector_map_f32(simd_f32.log_f32)(y)
+    assert np.max(np.abs(got - np.log(y)) / np.maximum(1.0, np.abs(np.log(y)))) < 1e-6
+    x = np.concatenate([rng.uniform(-6.0, simd_f32.ERFC_Y_MAX_F32, 7992),
+                        [0.0, -0.0, 1e-9, -1e-9, 9.0, -9.0, 3.0, -3.0]])
+    got, x = _vector_map_f32(simd_f32.erfc_f32)(x)
     expected = np.array([math.erfc(v) for v in x])
-    # relative error below 1e-12 (the fit: 3e-13; exp: a few ulps of a small argument)
-    np.testing.assert_allclose(_vector_map(simd_ir.erfc)(x), expected, rtol=1e-12, atol=0)
-    # beyond ERFC_Y_MAX: below 1e-40, and 2 for the mirror image
-    far = _vector_map(simd_ir.erfc)(np.array([10.0, 30.0, -10.0, -30.0]))
-    assert np.all(far[:2] < 1e-40) and np.all(far[:2] >= 0) and np.all(far[2:] == 2.0)
+    # exp(-y^2) inherits the float32 rounding of y^2 (half an ulp: 6e-8 y^2 relative)
+    assert np.all(np.abs(got / expected - 1.0) <= 1e-6 + 2e-7 * x * x)
+    far, _ = _vector_map_f32(simd_f32.erfc_f32)(np.array([10.0, 30.0, -10.0, -30.0] * 2))
+    assert np.all(far[[0, 1, 4, 5]] < 1e-35) and np.all(far[[0, 1, 4, 5]] >= 0)
+    assert np.all(far[[2, 3, 6, 7]] == 2.0)
 
 
-def test_erfcx_fit_is_accurate():
-    c = simd_ir.erfcx_fit()
-    y = np.linspace(0.0, simd_ir.ERFC_Y_MAX, 20001)
+def test_float32_erfcx_fit_is_accurate():
+    c = simd_f32.erfcx_fit_f32()
+    y = np.linspace(0.0, simd_f32.ERFC_Y_MAX_F32, 20001)
     t = 1.0 / (1.0 + 0.5 * y)
-    t_lo = 1.0 / (1.0 + 0.5 * simd_ir.ERFC_Y_MAX)
+    t_lo = 1.0 / (1.0 + 0.5 * simd_f32.ERFC_Y_MAX_F32)
     s = (t - t_lo) * 2.0 / (1.0 - t_lo) - 1.0
     expected = np.array([math.exp(v * v) * math.erfc(v) for v in y])
-    assert np.max(np.abs(np.polynomial.polynomial.polyval(s, c) / expected - 1)) < 1e-12
+    assert np.max(np.abs(np.polynomial.polynomial.polyval(s, c) / expected - 1)) < 5e-8
 
 
 @njit

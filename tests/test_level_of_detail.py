@@ -46,7 +46,9 @@ def test_level_of_detail_matches_drake_vtk_on_cad_meshes(model, stride):
 def test_the_likelihood_path_scores_the_images_that_match_drake_vtk(model):
     """The image update's likelihood path (8 particles at a time, core/lane_render.py)
     on the CAD robot scores exactly the images compared with RenderEngineVtk above:
-    its scores equal the plain likelihood of those images."""
+    its scores equal the plain likelihood of those images (to the float32 terms' stated
+    tolerance)."""
+    from drake_tracker.core.lane_likelihood import SCORE_ATOL_PER_PIXEL
     from drake_tracker.core.likelihood import (
         LikelihoodParams,
         log_likelihoods,
@@ -59,10 +61,12 @@ def test_the_likelihood_path_scores_the_images_that_match_drake_vtk(model):
     params = LikelihoodParams()
     observation = prepare_observation(synthetic_observation(renderer, center), params)
     q = random_configurations(model, 19, seed=4, spread_rad=0.05, center=center)
-    expected = log_likelihoods(renderer.render(q), observation, params)
+    images = renderer.render(q)
+    expected = log_likelihoods(images, observation, params)
     assert np.ptp(expected) > 1.0
-    np.testing.assert_allclose(renderer.score(q, observation), expected, rtol=1e-9,
-                               atol=1e-9)
+    robot_pixels = np.isfinite(images).sum(axis=(1, 2))
+    assert np.all(np.abs(renderer.score(q, observation) - expected)
+                  <= SCORE_ATOL_PER_PIXEL * robot_pixels)
 
 
 def test_clustered_sphere_stays_within_a_cell_and_keeps_its_culling():

@@ -127,6 +127,8 @@ def test_lane_pixel_scores_equal_the_scalar_formula(occluder_depth):
 
     from drake_tracker.core.lane_likelihood import (
         PIXELS_PER_CALL,
+        TERM_ATOL_F32,
+        TERM_RTOL_F32,
         lane_pixel_scores,
         lane_pixel_scores_truncated,
     )
@@ -152,10 +154,6 @@ def test_lane_pixel_scores_equal_the_scalar_formula(occluder_depth):
     d[-4:, 0] = [0.1, 6.0, 1.0 + 1e-12, 0.1]  # the ends of the range, an exact hit
     inverse = np.where(rng.random(d.shape) < 0.15, 0.0, 1.0 / d)  # 0: nothing rendered
     zb = np.concatenate([inverse.ravel(), np.zeros(LANES)])
-    acc = np.zeros(LANES)
-    o = observation
-    score(zb, np.arange(len(z)) * LANES, pixels, acc, o.pixel_table, o.uniform,
-          o.occluder_rate_per_m, o.occlusion_probability, o.truncation)
     # the kernel scores the rendered image's float32 depth
     depth = np.full(inverse.shape, np.inf)
     np.divide(1.0, inverse, out=depth, where=inverse > 0)
@@ -163,10 +161,26 @@ def test_lane_pixel_scores_equal_the_scalar_formula(occluder_depth):
     terms = np.array([[_scalar_log_ratio(z[p], depth[p, lane], params)
                        for lane in range(LANES)] for p in pixels])
     assert np.ptp(terms) > 5.0
-    # Stated tolerance: 1e-13 of the sum of the terms' sizes (erfcx fit 3e-13 relative,
-    # exp and log to a few ulps); the scores are sums over pixels.
-    np.testing.assert_allclose(acc, terms.sum(axis=0), rtol=0,
-                               atol=1e-13 * np.abs(terms).sum(axis=0).max())
+    o = observation
+    # Term by term: each pixel scored alone, beside the LANES zeros past the image
+    # (nothing rendered there: a term of 0).
+    padding = len(z) * LANES
+    each = np.zeros((len(z), LANES))
+    for p in pixels:
+        offsets = np.full(PIXELS_PER_CALL, padding)
+        offsets[0] = p * LANES
+        zb_p = zb.copy()
+        score(zb_p, offsets, np.array([p] + [0] * (PIXELS_PER_CALL - 1)), each[p],
+              o.pixel_table, o.uniform, o.occluder_rate_per_m, o.occlusion_probability,
+              o.truncation)
+    # Stated tolerance: the mixture is evaluated in float32 (module docstring).
+    np.testing.assert_allclose(each, terms, rtol=TERM_RTOL_F32, atol=TERM_ATOL_F32)
+    assert np.all(each[inverse == 0] == 0.0)
+    # All pixels in one pass: the sums of those terms (summed in double).
+    acc = np.zeros(LANES)
+    score(zb, np.arange(len(z)) * LANES, pixels, acc, o.pixel_table, o.uniform,
+          o.occluder_rate_per_m, o.occlusion_probability, o.truncation)
+    np.testing.assert_allclose(acc, each.sum(axis=0), rtol=1e-12)
     assert not zb.any()  # the scored pixels are cleared for the next batch
 
 

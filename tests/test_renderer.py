@@ -88,6 +88,7 @@ def _observation_of(renderer, q_true, rng, background_m=2.5):
 
 @pytest.mark.parametrize("stride", [8, 4], ids=["80x60", "160x120"])
 def test_fused_render_likelihood_equals_render_then_likelihood(model, configurations, stride):
+    from drake_tracker.core.lane_likelihood import SCORE_ATOL_PER_PIXEL
     from drake_tracker.core.likelihood import (
         LikelihoodParams,
         log_likelihoods,
@@ -107,10 +108,13 @@ def test_fused_render_likelihood_equals_render_then_likelihood(model, configurat
         fused = renderer.score(q, observation)
         assert fused.shape == (len(q),)
         assert np.ptp(expected) > 1.0  # the particles are actually told apart
-        np.testing.assert_allclose(fused, expected, rtol=1e-9, atol=1e-9)
+        # Stated tolerance: the kernel's pixel terms are float32, summed in double over
+        # the pixels where the particle's robot is drawn.
+        robot_pixels = np.isfinite(renderer.render(q)).sum(axis=(1, 2))
+        assert np.all(np.abs(fused - expected) <= SCORE_ATOL_PER_PIXEL * robot_pixels)
         # Particles are independent of their batch.
-        np.testing.assert_allclose(renderer.score(q[5:9], observation),
-                                   expected[5:9], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(renderer.score(q[5:9], observation), fused[5:9],
+                                   rtol=1e-12)
     assert renderer.score(q[:0], observation).shape == (0,)
     with pytest.raises(ValueError, match="shape"):
         wrong = prepare_observation(np.ones((7, 9), np.float32), LikelihoodParams())
