@@ -25,6 +25,26 @@ def test_a_changed_source_empties_the_folder_cache(tmp_path):
     assert not (cache / "a.f-1.py311.nbi").exists()
 
 
+def test_callers_caches_are_emptied_with_the_folder_cache(tmp_path):
+    """A kernel in another folder that calls this folder's kernels holds their compiled
+    code in its own cache entry: it goes too (the bench's replay of the scoring kernel
+    measured the previous kernel after a change to core/ before this)."""
+    core, caller = tmp_path / "core", tmp_path / "package"
+    for folder in (core, caller):
+        (folder / "__pycache__").mkdir(parents=True)
+    (core / "a.py").write_text("x = 1\n")
+    entry = caller / "__pycache__" / "bench.replay-1.py311.1.nbc"
+    entry.write_bytes(b"code with a's kernel inlined")
+    assert clear_stale_kernel_cache(core, (caller,))
+    assert not entry.exists()
+    entry.write_bytes(b"code")
+    assert not clear_stale_kernel_cache(core, (caller,))  # unchanged: kept
+    assert entry.exists()
+    (core / "a.py").write_text("x = 2\n")
+    assert clear_stale_kernel_cache(core, (caller,))
+    assert not entry.exists()
+
+
 def test_an_unwritable_folder_is_left_alone(tmp_path):
     (tmp_path / "a.py").write_text("x = 1\n")
     (tmp_path / "__pycache__").write_text("not a folder")  # mkdir / glob fail

@@ -6,8 +6,8 @@ loaded from the cache with the code of a callee (in another file) that did. Afte
 ``git pull`` that changes, say, ``lanes.py`` but not ``render_likelihood.py``, that
 would run stale code (and can crash). :func:`clear_stale_kernel_cache`, run when
 ``drake_tracker.core`` is imported (before any kernel is called), hashes the sources of
-this folder's modules and empties the folder's numba cache when they changed since it
-was filled. A cache elsewhere (numba's fallback for an unwritable package folder, or
+this folder's modules and empties the folder's numba cache, and the package folder's
+(where the bench's kernels call these), when they changed since it was filled. A cache elsewhere (numba's fallback for an unwritable package folder, or
 ``NUMBA_CACHE_DIR``) is left alone: there, a release's files change together.
 """
 
@@ -30,17 +30,22 @@ def sources_hash(folder: Path = _FOLDER) -> str:
     return digest.hexdigest()
 
 
-def clear_stale_kernel_cache(folder: Path = _FOLDER) -> bool:
-    """Removes the numba cache files (``*.nbi``, ``*.nbc``) of ``folder/__pycache__``
-    if the sources changed since the stamp there was written, and writes the new stamp.
-    Returns whether files were removed. Never raises for an unwritable folder."""
+def clear_stale_kernel_cache(folder: Path = _FOLDER,
+                             callers: tuple[Path, ...] = (_FOLDER.parent,)) -> bool:
+    """Removes the numba cache files (``*.nbi``, ``*.nbc``) of ``folder/__pycache__``,
+    and of each ``callers`` folder's (kernels there call this folder's, e.g. the
+    bench's replay of the scoring kernel), if the sources of ``folder`` changed since the
+    stamp there was written, and writes the new stamp. Returns whether files were
+    removed. Never raises for an unwritable folder."""
     cache = folder / "__pycache__"
     stamp = cache / _STAMP
     current = sources_hash(folder)
     try:
         if stamp.exists() and stamp.read_text() == current:
             return False
-        stale = list(cache.glob("*.nbi")) + list(cache.glob("*.nbc"))
+        stale = [path for where in (folder, *callers)
+                 for pattern in ("*.nbi", "*.nbc")
+                 for path in (where / "__pycache__").glob(pattern)]
         for path in stale:
             path.unlink(missing_ok=True)
         cache.mkdir(exist_ok=True)

@@ -3,8 +3,10 @@ likelihood evaluations.
 
 :func:`fused_scores` gives the same numbers as
 ``likelihood.log_likelihoods(images, observation, params)`` for the images that
-:func:`~drake_tracker.core.rasterize.render_kernel` would render (to about 1e-13
-relative, tested), without writing the (N, H, W) images to memory. The particles go
+:func:`~drake_tracker.core.rasterize.render_kernel` would render (the images bit for bit;
+the pixel terms in float32, within
+:data:`~drake_tracker.core.lane_likelihood.SCORE_ATOL_PER_PIXEL` per pixel, tested),
+without writing the (N, H, W) images to memory. The particles go
 through in batches of :data:`~drake_tracker.core.lanes.LANES`: forward kinematics per
 particle (8 at a time), then one pass of :func:`~drake_tracker.core.lane_render.render_lanes` and
 :func:`~drake_tracker.core.lane_render.score_pixels` for the whole batch (SIMD across
