@@ -154,50 +154,65 @@ def lane_triangle(typingctx: object, co: types.Type, box: types.Type, U: types.T
                                 _FALSE, _TRUE)
         rows = [b.mul(args[k], ir.Constant(I64, LANES)) for k in (5, 6, 7)]
         zero = v.const(0.0)
-        masks, halves = [], []
+        # Back faces first: a triangle that faces away in every lane (about half of a
+        # closed part's) skips its boxes and setup.
+        live = []
         for h in range(_HALVES):
-            uu = [v.load(b, u_d, v.add_offset(b, r, h * WIDTH)) for r in rows]
-            vv = [v.load(b, v_d, v.add_offset(b, r, h * WIDTH)) for r in rows]
-            zz = [v.load(b, iz_d, v.add_offset(b, r, h * WIDTH)) for r in rows]
             o = [v.load(b, o_d, _row(k, h)) for k in range(3)]
             facing = b.fadd(b.fadd(b.fmul(nrm[0], o[0]), b.fmul(nrm[1], o[1])),
                             b.fmul(nrm[2], o[2]))
             state = v.load(b, fast_d, h * WIDTH)
             front = b.or_(b.or_(b.fcmp_ordered(">", facing, nrm[3]), open_surface),
                           b.fcmp_ordered("==", state, v.const(2.0)))
-            c0 = v.vmax(b, zero, v.vceil(b, v.vmin(b, uu[0], v.vmin(b, uu[1], uu[2]))))
-            c1 = v.vmin(b, w1, v.vfloor(b, v.vmax(b, uu[0], v.vmax(b, uu[1], uu[2]))))
-            r0 = v.vmax(b, zero, v.vceil(b, v.vmin(b, vv[0], v.vmin(b, vv[1], vv[2]))))
-            r1 = v.vmin(b, h1, v.vfloor(b, v.vmax(b, vv[0], v.vmax(b, vv[1], vv[2]))))
-            on = b.fcmp_ordered("!=", state, zero)
-            ok = b.and_(b.and_(on, front), b.and_(b.fcmp_ordered("<=", c0, c1),
-                                                  b.fcmp_ordered("<=", r0, r1)))
-            masks.append(ok)
-            halves.append((uu, vv, zz, (c0, c1, r0, r1)))
+            live.append(b.and_(front, b.fcmp_ordered("!=", state, zero)))
         result = cgutils.alloca_once_value(b, ir.Constant(I64, 0))
-        with b.if_then(v.any_true(b, masks)):
-            final = []
-            bounds = [None] * 4
-            for h, (uu, vv, zz, box) in enumerate(halves):
-                area = b.fsub(b.fmul(b.fsub(uu[1], uu[0]), b.fsub(vv[2], vv[0])),
-                              b.fmul(b.fsub(uu[2], uu[0]), b.fsub(vv[1], vv[0])))
-                ok = b.and_(masks[h], b.fcmp_ordered(">=", v.vabs(b, area), v.const(1e-12)))
-                final.append(ok)
-                _setup(b, co_d, h, uu, vv, zz, area, ok, box, iz_lo, iz_hi)
-                c0, c1, r0, r1 = box
-                for k, (value, pick, none) in enumerate(
-                        ((r0, v.vmin, math.inf), (r1, v.vmax, -math.inf),
-                         (c0, v.vmin, math.inf), (c1, v.vmax, -math.inf))):
-                    value = b.select(ok, value, v.const(none))
-                    bounds[k] = value if bounds[k] is None else pick(b, bounds[k], value)
-            with b.if_then(v.any_true(b, final)):
-                for k, pick in enumerate((v.vmin, v.vmax, v.vmin, v.vmax)):
-                    b.store(b.fptosi(v.reduce(b, bounds[k], pick), I64),
-                            b.gep(box_d, [ir.Constant(I64, k)]))
-                b.store(v.bits(b, final), result)
+        with b.if_then(v.any_true(b, live)):
+            b.store(_boxes_and_setup(b, co_d, box_d, (u_d, v_d, iz_d), rows, live, w1, h1,
+                                     iz_lo, iz_hi), result)
         return b.load(result)
 
     return sig, codegen
+
+
+def _boxes_and_setup(b, co_d, box_d, vertex_data, rows, live, w1, h1, iz_lo, iz_hi):
+    """:func:`lane_triangle`'s work for a triangle that faces the camera in the lanes
+    ``live`` (a mask per half): each lane's pixel box, and the setup of those lanes whose
+    box holds a pixel centre. Returns the lanes that draw it as bits (an i64 value)."""
+    zero = v.const(0.0)
+    u_d, v_d, iz_d = vertex_data
+    masks, halves = [], []
+    for h in range(_HALVES):
+        uu, vv, zz = ([v.load(b, d, v.add_offset(b, r, h * WIDTH)) for r in rows]
+                      for d in (u_d, v_d, iz_d))
+        c0 = v.vmax(b, zero, v.vceil(b, v.vmin(b, uu[0], v.vmin(b, uu[1], uu[2]))))
+        c1 = v.vmin(b, w1, v.vfloor(b, v.vmax(b, uu[0], v.vmax(b, uu[1], uu[2]))))
+        r0 = v.vmax(b, zero, v.vceil(b, v.vmin(b, vv[0], v.vmin(b, vv[1], vv[2]))))
+        r1 = v.vmin(b, h1, v.vfloor(b, v.vmax(b, vv[0], v.vmax(b, vv[1], vv[2]))))
+        masks.append(b.and_(live[h], b.and_(b.fcmp_ordered("<=", c0, c1),
+                                            b.fcmp_ordered("<=", r0, r1))))
+        halves.append((uu, vv, zz, (c0, c1, r0, r1)))
+    result = cgutils.alloca_once_value(b, ir.Constant(I64, 0))
+    with b.if_then(v.any_true(b, masks)):
+        final = []
+        bounds = [None] * 4
+        for h, (uu, vv, zz, box) in enumerate(halves):
+            area = b.fsub(b.fmul(b.fsub(uu[1], uu[0]), b.fsub(vv[2], vv[0])),
+                          b.fmul(b.fsub(uu[2], uu[0]), b.fsub(vv[1], vv[0])))
+            ok = b.and_(masks[h], b.fcmp_ordered(">=", v.vabs(b, area), v.const(1e-12)))
+            final.append(ok)
+            _setup(b, co_d, h, uu, vv, zz, area, ok, box, iz_lo, iz_hi)
+            c0, c1, r0, r1 = box
+            for k, (value, pick, none) in enumerate(
+                    ((r0, v.vmin, math.inf), (r1, v.vmax, -math.inf),
+                     (c0, v.vmin, math.inf), (c1, v.vmax, -math.inf))):
+                value = b.select(ok, value, v.const(none))
+                bounds[k] = value if bounds[k] is None else pick(b, bounds[k], value)
+        with b.if_then(v.any_true(b, final)):
+            for k, pick in enumerate((v.vmin, v.vmax, v.vmin, v.vmax)):
+                b.store(b.fptosi(v.reduce(b, bounds[k], pick), I64),
+                        b.gep(box_d, [ir.Constant(I64, k)]))
+            b.store(v.bits(b, final), result)
+    return b.load(result)
 
 
 def _scalar(b: ir.IRBuilder, fn, x: ir.Value) -> ir.Value:
