@@ -7,8 +7,9 @@ loaded from the cache with the code of a callee (in another file) that did. Afte
 would run stale code (and can crash). :func:`clear_stale_kernel_cache`, run when
 ``drake_tracker.core`` is imported (before any kernel is called), hashes the sources of
 this folder's modules and empties the folder's numba cache, and the package folder's
-(where the bench's kernels call these), when they changed since it was filled. A cache elsewhere (numba's fallback for an unwritable package folder, or
-``NUMBA_CACHE_DIR``) is left alone: there, a release's files change together.
+(where the bench's kernels call these), when they changed since it was filled. A cache
+elsewhere (numba's fallback for an unwritable package folder, or ``NUMBA_CACHE_DIR``)
+is left alone: there, a release's files change together.
 """
 
 from __future__ import annotations

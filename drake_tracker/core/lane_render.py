@@ -11,8 +11,9 @@ gets exactly its own image), into a z-buffer whose pixel holds the lanes side by
 The arithmetic is that of the scalar rasteriser (:mod:`drake_tracker.core.rasterize`'s
 box path), so the images are the same, and the scores agree with
 ``likelihood.log_likelihoods`` of ``render_kernel``'s images to the float32 pixel terms'
-stated tolerance (:mod:`drake_tracker.core.lane_likelihood`; tested). Of a part that reaches the near plane, the triangles that do are clipped
-lane by lane by the scalar path.
+stated tolerance (:mod:`drake_tracker.core.lane_likelihood`; tested). Of a part that
+reaches the near plane, the triangles that do are clipped lane by lane by the scalar
+path.
 """
 
 from __future__ import annotations
