@@ -115,6 +115,10 @@ def test_bad_images_are_rejected():
         log_likelihoods(np.ones((2, 3, 3)), prepare_observation(np.ones((2, 2)), PARAMS), PARAMS)
     with pytest.raises(ValueError, match="occlusion_probability"):
         LikelihoodParams(occlusion_probability=1.0).validate()
+    # the float32 mixture's floor, the uniform density, must be a normal float32
+    with pytest.raises(ValueError, match="tail_weight / max_depth_m must be >= 1e-30"):
+        LikelihoodParams(tail_weight=1e-32).validate()
+    LikelihoodParams(tail_weight=1e-29).validate()
 
 
 @pytest.mark.parametrize("occluder_depth", ["truncated", "independent"])

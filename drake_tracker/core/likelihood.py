@@ -29,6 +29,10 @@ import numpy as np
 
 import drake_tracker.core.numba_threading  # noqa: F401  (threading layer before any kernel)
 
+#: The least uniform density w / Z_max (1/m) allowed: the image update's float32 mixture
+#: never falls below it, so its logarithm is that of a normal float32 number.
+MIN_UNIFORM_DENSITY = 1e-30
+
 
 @dataclass
 class LikelihoodParams:
@@ -61,6 +65,11 @@ class LikelihoodParams:
             if isinstance(value, float):
                 need(math.isfinite(value), field, "must be finite")
         need(0 < self.tail_weight < 1, "tail_weight", "must be in (0, 1)")
+        # the image update evaluates the mixture in float32, whose floor is the uniform
+        # density w / Z_max: it must be a normal float32 number (>= 1.2e-38), with room
+        need(self.tail_weight / max(self.max_depth_m, 1e-300) >= MIN_UNIFORM_DENSITY,
+             "tail_weight", f"tail_weight / max_depth_m must be >= {MIN_UNIFORM_DENSITY:g} "
+             "(the uniform density is the float32 mixture's floor)")
         need(self.depth_noise_std_m > 0, "depth_noise_std_m", "must be > 0")
         need(self.depth_noise_factor_per_m >= 0, "depth_noise_factor_per_m", "must be >= 0")
         need(self.max_depth_m > 0, "max_depth_m", "must be > 0")
