@@ -4,8 +4,9 @@ For one robot, at the bench's image size and about 2000 likelihood evaluations p
 update (particles per block x blocks x annealing layers):
 
 * ``updates_per_s``: whole CPF image updates per second, per numba thread count (wall
-  clock), and ``updates_per_cpu_s`` per second of this process's CPU time (summed over
-  its threads): on a shared machine, the one-thread CPU figure is what an idle core gives;
+  clock; the counts take turns update by update, the quickest of each kept), and
+  ``updates_per_cpu_s`` per second of this process's CPU time (summed over its
+  threads): on a shared machine, the one-thread CPU figure is what an idle core gives;
 * ``python_us_per_block``: the part of an update spent outside the compiled sweeps
   (scoring kernel and CPF block loop: :mod:`drake_tracker.core.cpf_compiled`), per
   block call;
@@ -82,26 +83,52 @@ def tracking_prior(model: TrackerModel) -> np.ndarray:
                            np.ones(model.num_joints, bool))
 
 
+def _timed_update(update: CpfImageUpdate, observation: PreparedObservation,
+                  prior: np.ndarray, rng: np.random.Generator) -> tuple[float, float, float]:
+    """One image update: (wall s, CPU s, s in the scoring kernel)."""
+    before = update.times.render_s
+    c0 = time.process_time()
+    t0 = time.perf_counter()
+    update(prior, observation, rng)
+    return (time.perf_counter() - t0, time.process_time() - c0,
+            update.times.render_s - before)
+
+
+def _best(update: CpfImageUpdate, timed: list[tuple[float, float, float]]) -> dict:
+    """The figures of :func:`time_updates` from its timed updates (the quickest one's)."""
+    total, _, kernel = min(timed)
+    calls = len(update.blocks) * len(update.annealing_betas)
+    return {"updates_per_s": 1.0 / total, "seconds": total,
+            "updates_per_cpu_s": 1.0 / min(cpu for _, cpu, _ in timed),
+            "python_us_per_block": 1e6 * (total - kernel) / calls,
+            "kernel_ms": 1e3 * kernel}
+
+
 def time_updates(update: CpfImageUpdate, observation: PreparedObservation,
                  prior: np.ndarray, repeats: int) -> dict:
     """Best of ``repeats`` image updates: updates/s, and the time outside the kernel."""
     rng = np.random.default_rng(0)
     update(prior, observation, rng)  # warm-up (and compile)
-    totals, kernels, cpus = [], [], []
-    for _ in range(max(1, repeats)):
-        before = update.times.render_s
-        c0 = time.process_time()
-        t0 = time.perf_counter()
+    return _best(update, [_timed_update(update, observation, prior, rng)
+                          for _ in range(max(1, repeats))])
+
+
+def time_updates_by_threads(update: CpfImageUpdate, observation: PreparedObservation,
+                            prior: np.ndarray, repeats: int,
+                            threads: tuple[int, ...]) -> dict[str, dict]:
+    """:func:`time_updates` for each numba thread count, the counts taking turns update
+    by update (so that a change of the shared machine's speed hits all of them alike,
+    and their ratio means what it says)."""
+    rng = np.random.default_rng(0)
+    timed: dict[int, list] = {t: [] for t in threads}
+    for t in threads:  # warm-up (and compile) each
+        numba.set_num_threads(min(t, numba.config.NUMBA_NUM_THREADS))
         update(prior, observation, rng)
-        totals.append(time.perf_counter() - t0)
-        cpus.append(time.process_time() - c0)
-        kernels.append(update.times.render_s - before)
-    k = int(np.argmin(totals))
-    calls = len(update.blocks) * len(update.annealing_betas)
-    return {"updates_per_s": 1.0 / totals[k], "seconds": totals[k],
-            "updates_per_cpu_s": 1.0 / min(cpus),
-            "python_us_per_block": 1e6 * (totals[k] - kernels[k]) / calls,
-            "kernel_ms": 1e3 * kernels[k]}
+    for _ in range(max(1, repeats)):
+        for t in threads:
+            numba.set_num_threads(min(t, numba.config.NUMBA_NUM_THREADS))
+            timed[t].append(_timed_update(update, observation, prior, rng))
+    return {str(t): _best(update, timed[t]) for t in threads}
 
 
 def bench_robot(model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
@@ -112,11 +139,9 @@ def bench_robot(model: TrackerModel, camera: CameraIntrinsics, params: TrackerPa
     observation = test_observation(update)
     prior = tracking_prior(model)
     previous = numba.get_num_threads()
-    per_threads = {}
     try:
-        for t in threads:
-            numba.set_num_threads(min(t, numba.config.NUMBA_NUM_THREADS))
-            per_threads[str(t)] = time_updates(update, observation, prior, repeats)
+        per_threads = time_updates_by_threads(update, observation, prior, 2 * repeats,
+                                              threads)
         numba.set_num_threads(1)
         stages = _stages(update, observation, prior, repeats)
     finally:
