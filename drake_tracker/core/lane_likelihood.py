@@ -14,7 +14,8 @@ and rendered depths is formed in double before it is rounded, and each pixel's t
 are summed in double, so each term is within :data:`TERM_ATOL_F32` + :data:`TERM_RTOL_F32`
 of its size of the double-precision term (tested against the direct transcription),
 and a score of P pixels within P times that (a few hundred ulps of float32 in all; the
-errors' signs vary, so in practice far less: 2e-4 nats on scores of thousands).
+errors' signs vary, so in practice far less: at most 2e-4 nats at 80x60 and 7e-4 at
+160x120 on scores of thousands, measured).
 """
 
 from __future__ import annotations

@@ -4,8 +4,9 @@ float32 accuracy from multiplies, adds and bit operations.
 
 The pixel likelihood (:mod:`drake_tracker.core.lane_likelihood`) evaluates its mixture
 in these: half the instructions of two <4 x double> halves, and polynomials of about half
-the degree of :mod:`drake_tracker.core.simd_ir`'s, which are accurate to double precision.
-Nothing here is called at run time: these functions emit IR.
+the degree that double precision needs (the double-precision versions these replaced are
+in git history, before d9a4b87). Nothing here is called at run time: these functions
+emit IR.
 
 Accuracy (tested against libm in ``tests/test_lanes.py``): exp and log within a few
 float32 ulps (relative 1e-6, log relative to max(1, |log y|)); erfc within 1e-6 + 2e-7 x^2
@@ -30,7 +31,7 @@ VEC_F32 = ir.VectorType(F32, WIDTH_F32)
 IVEC_I32 = ir.VectorType(I32, WIDTH_F32)
 
 #: erfc(y) for y in [0, ERFC_Y_MAX_F32] as exp(-y^2) erfcx(y), erfcx a polynomial in s
-#: (as in simd_ir); erfc(9) = 4e-37 is near float32's least normal number (1.2e-38).
+#: (:func:`erfcx_fit_f32`); erfc(9) = 4e-37 is near float32's least normal number (1.2e-38).
 ERFC_Y_MAX_F32 = 9.0
 _ERFCX_DEGREE = 10
 _T_LO = 1.0 / (1.0 + 0.5 * ERFC_Y_MAX_F32)
