@@ -46,11 +46,8 @@ class JointNoise:
     #: c: fraction of the bias that remains after one second, in (0, 1]. Without images
     #: the bias relaxes to N(0, σb²/(-2 ln c)) (5.7 deg). 0.98 keeps 90 % of a learnt
     #: bias over a 5 s occlusion; 0.9 kept 59 % (occlusion-heavy 52.6 mm median while
-    #: occluded, 22.9 now), and 0.98 lost a seed of s-full-arm/time-varying until the
-    #: second opinion (``health.second_opinion_agreement``) found the arm again. With
-    #: σb = 0.0088 as well (the "occlusion hold", 2.5 deg) the heavy occlusion is held
-    #: better (12.8 mm) but arm++/constant lost a seed (README, "A bias that outlasts
-    #: an occlusion").
+    #: occluded, 22.9 now). With σb = 0.0088 as well (the "occlusion hold") arm++/constant
+    #: lost a seed (README, "A bias that outlasts an occlusion").
     bias_decay_per_s: float = 0.98
     #: Expected bias jumps per second (a cable slipping, a gear skipping): the image
     #: update's prior admits a step of ``bias_jump_std_rad`` with probability
@@ -104,11 +101,9 @@ class ImageParams:
     enabled: bool = True
     #: Particles per block; likelihood evaluations per image = particles x blocks.
     num_particles: int = 50
-    #: Particles per block until the tracker has acquired the arm (``health.acquired``);
-    #: 0 = ``num_particles``. The first images are a search over the whole initial bias
-    #: prior, not tracking: with 50, the start-up images hid the arm behind the scene on
-    #: 6 of 6 tracker seeds of arm++/constant, seed 1 (0.4-0.7 m from then on); with 150
-    #: and the wider initial bias prior, 6 of 6 acquired it within 2 s (docs/defaults.md).
+    #: Particles per block until the arm is acquired (``health.acquired``); 0 =
+    #: ``num_particles``. The first images search the whole initial bias prior: with 50,
+    #: 6 of 6 tracker seeds of arm++/constant lost the arm, with 150 none (docs/defaults.md).
     acquisition_num_particles: int = 150
     #: ``per-joint`` (one block per joint, base to tip, then the camera offset),
     #: ``arm-camera`` (robot joints, then the 6 virtual joints), ``single``, ``camera``
@@ -132,6 +127,11 @@ class ImageParams:
     #: Images closer than this to the previously processed one are skipped (s); 0 = all.
     #: 0.1 processes about 10 of a 30 Hz camera's images per second.
     min_image_interval_s: float = 0.1
+    #: In a Diagram: simulated time (s) from an image's arrival to its observation, the
+    #: update's compute time. > 0: the update runs on a worker thread meanwhile (the
+    #: Simulator waits at the deadline if it is not done); 0: at once, in the Simulator's
+    #: thread. An image due while one is in flight applies that one first.
+    update_latency_s: float = 0.08
     #: ``batched`` (numba rasteriser) or ``drake`` (RenderEngineVtk, the reference).
     renderer: str = "batched"
     near_m: float = 0.1
@@ -299,8 +299,10 @@ def validate_tracker_params(params: TrackerParams) -> None:
         "ending with image.image_width_px")
     _check(math.isfinite(im.image_time_offset_s), "image.image_time_offset_s",
            im.image_time_offset_s, "must be finite")
-    _check(im.min_image_interval_s >= 0, "image.min_image_interval_s",
-           im.min_image_interval_s, "must be >= 0")
+    for name in ("min_image_interval_s", "update_latency_s"):
+        value = getattr(im, name)
+        _check(math.isfinite(value) and value >= 0, f"image.{name}", value,
+               "must be finite and >= 0")
     _check(im.renderer in ("batched", "drake"), "image.renderer", im.renderer,
            "must be 'batched' or 'drake'")
     _check(0 < im.near_m < im.far_m, "image.near_m/far_m", (im.near_m, im.far_m),

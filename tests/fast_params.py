@@ -10,4 +10,8 @@ def small_params() -> TrackerParams:
     p.image.num_particles = 20
     p.image.annealing_betas = [0.1, 1.0]
     p.image.min_image_interval_s = 0.0
+    # Every image (33 ms apart) is applied at once, as the offline tracker applies it, so
+    # that a Diagram's estimates equal the offline tracker's (the latency's own test:
+    # tests/test_systems.py).
+    p.image.update_latency_s = 0.0
     return p

@@ -82,9 +82,11 @@ BOUND_MM = {
 
 
 def fast_params() -> TrackerParams:
-    """``small_params()`` at the default image rate (10 images/s)."""
+    """``small_params()`` at the default image rate (10 images/s) and update latency (on
+    the worker thread in a Diagram)."""
     p = small_params()
     p.image.min_image_interval_s = TrackerParams().image.min_image_interval_s
+    p.image.update_latency_s = TrackerParams().image.update_latency_s
     return p
 
 

@@ -118,13 +118,18 @@ def _simulate(apollo, run, p, h):
     return diagram, simulator, tracker, logger
 
 
-@pytest.mark.parametrize("robot", ["apollo", "arm6"])
-def test_diagram_and_offline_tracker_give_the_same_estimates(robot, request):
+@pytest.mark.parametrize("robot,latency_s", [("apollo", 0.0), ("arm6", 0.0),
+                                              ("apollo", 0.01)])
+def test_diagram_and_offline_tracker_give_the_same_estimates(robot, latency_s, request):
+    """The same estimates, except within ``image.update_latency_s`` (+ 2 ticks) of an
+    image's arrival: the Diagram applies its update that much later, on the worker
+    thread when the latency is > 0 (shorter here than the 33 ms between images)."""
     apollo = request.getfixturevalue(robot)  # either robot model
     h = 1.0 / 200.0
     run = synthetic_run(apollo, duration_s=0.6, encoder_rate_hz=200.0, seed=4)
     p = params(seed=4)
     p.image.min_image_interval_s = 0.0
+    p.image.update_latency_s = latency_s
     diagram, simulator, tracker, logger = _simulate(apollo, run, p, h)
     # Sample right after the bank's update at k*h + h/2 (the logger publishes each step).
     sample_times = run.reading_times_s + 0.6 * h
@@ -137,17 +142,19 @@ def test_diagram_and_offline_tracker_give_the_same_estimates(robot, request):
         simulator.AdvanceTo(t)
         diagram_q.append(tracker.port("estimated_position").Eval(bank_context).copy())
     diagram_q = np.array(diagram_q)
-    # The Diagram applies an image at the first CPF tick after it arrives (<= h later),
-    # the offline tracker at once: compare where no image arrived in the last 2 ticks.
+    # The Diagram applies an image at the first CPF tick after it arrives (<= h later)
+    # plus the latency, the offline tracker at once: compare where no image arrived in
+    # the latency and the last 2 ticks before.
     arrivals = run.image_arrival_times_s
-    settled = np.array([not np.any((arrivals > t - 2.5 * h) & (arrivals <= t))
+    settled = np.array([not np.any((arrivals > t - latency_s - 2.5 * h) & (arrivals <= t))
                         for t in sample_times])
-    assert settled.sum() > 0.6 * len(settled)
+    assert settled.sum() > (0.6 if latency_s == 0 else 0.25) * len(settled)
     difference = np.abs(diagram_q[settled] - offline.positions[settled])
     assert np.nanmax(difference) <= 1e-9, np.nanmax(difference)
     # And the estimate really moved away from the raw readings (images were applied).
     cpf_state = tracker.image_update.GetMyContextFromRoot(context).get_abstract_state(0)
-    assert cpf_state.get_value().images_applied == offline.num_images_applied
+    in_flight = cpf_state.get_value().in_flight is not None  # its result is not due yet
+    assert cpf_state.get_value().images_applied + in_flight == offline.num_images_applied
 
 
 def test_diagram_context_can_be_copied_and_resimulated(apollo):
@@ -202,16 +209,12 @@ def test_a_copied_context_shares_the_stored_states_and_neither_sees_the_other(ap
     assert simulator.get_num_unrestricted_updates() <= 2 * ticks + frames
 
 
-def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, caplog):
-    import logging
-
+def _cpf_system_with_a_frame(apollo, p):
     from drake_tracker.core.belief_buffer import ImageAnchor
     from drake_tracker.core.renderer import default_view_configuration
     from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
     from drake_tracker.systems.messages import ImagePrior
 
-    p = params()
-    p.image.min_image_interval_s = 0.0
     system = CpfImageUpdateSystem(apollo, CAMERA, p, period_s=0.01)
     context = system.CreateDefaultContext()
     run = synthetic_run(apollo, duration_s=0.2, seed=2)
@@ -221,6 +224,18 @@ def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, capl
     system.GetInputPort("depth_frame").FixValue(context, frame)
     anchor = ImageAnchor(0.0, 0.0, belief, np.zeros(apollo.num_joints))
     system.GetInputPort("image_prior").FixValue(context, ImagePrior(0, 0.0, anchor, ""))
+    return system, context, frame, anchor
+
+
+def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, caplog):
+    import logging
+
+    from drake_tracker.systems.messages import ImagePrior
+
+    p = params()
+    p.image.min_image_interval_s = 0.0
+    p.image.update_latency_s = 0.0  # at once (the worker thread: the test below)
+    system, context, frame, anchor = _cpf_system_with_a_frame(apollo, p)
     simulator = Simulator(system, context)
     simulator.AdvanceTo(0.015)
     message = system.GetOutputPort("image_observation").Eval(context)
@@ -231,8 +246,52 @@ def test_cpf_system_processes_each_new_frame_once_through_its_ports(apollo, capl
     # A malformed image is skipped with a warning, not raised inside the simulation.
     bad = DepthFrame(0.03, 0.06, np.ones((10, 10), np.float32), 1)
     system.GetInputPort("depth_frame").FixValue(context, bad)
-    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.03, anchor, ""))
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.03, anchor, "", 1))
     with caplog.at_level(logging.WARNING):
         simulator.AdvanceTo(0.055)
     assert "image 1 skipped" in caplog.text
     assert system.GetOutputPort("image_observation").Eval(context).id == 1
+
+
+def test_cpf_system_applies_a_worker_update_after_its_latency_with_the_same_result(apollo):
+    """With ``update_latency_s`` > 0 the update runs on the worker thread and its message
+    appears that much later, equal to the one computed at once; a frame that is due
+    while an update is in flight applies that update first."""
+    from drake_tracker.systems.messages import ImagePrior
+
+    messages = {}
+    for latency in (0.0, 0.03):
+        p = params()
+        p.image.min_image_interval_s = 0.0
+        p.image.update_latency_s = latency
+        system, context, frame, anchor = _cpf_system_with_a_frame(apollo, p)
+        simulator = Simulator(system, context)
+        simulator.AdvanceTo(0.025)  # ticks at 0, 0.01, 0.02
+        port = system.GetOutputPort("image_observation")
+        in_flight = context.get_abstract_state(0).get_value().in_flight
+        if latency:
+            assert port.Eval(context).id == 0 and in_flight.due_s == pytest.approx(0.03)
+            simulator.AdvanceTo(0.035)
+            assert context.get_abstract_state(0).get_value().in_flight is None
+        messages[latency] = port.Eval(context)
+        assert messages[latency].id == 1 and messages[latency].sequence == 0
+    for name in ("precision", "information"):
+        np.testing.assert_array_equal(getattr(messages[0.0].observation, name),
+                                      getattr(messages[0.03].observation, name))
+    # A due frame at 0.01 s, while image 0 is in flight until 0.05 s: image 0 first.
+    p.image.update_latency_s = 0.05
+    system, context, frame, anchor = _cpf_system_with_a_frame(apollo, p)
+    simulator = Simulator(system, context)
+    simulator.AdvanceTo(0.005)
+    system.GetInputPort("depth_frame").FixValue(context, DepthFrame(0.01, 0.01, frame.depth_m, 1))
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.01, anchor, ""))
+    simulator.AdvanceTo(0.015)
+    s = context.get_abstract_state(0).get_value()
+    assert s.message.id == 1 and s.message.sequence == 0 and s.in_flight is None
+    # Image 1 waits until the buffer has taken image 0's update into its prior.
+    simulator.AdvanceTo(0.025)
+    assert context.get_abstract_state(0).get_value().in_flight is None
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.01, anchor, "", 1))
+    simulator.AdvanceTo(0.035)
+    s = context.get_abstract_state(0).get_value()
+    assert s.in_flight.frame.sequence == 1 and s.in_flight.due_s == pytest.approx(0.08)

@@ -96,7 +96,7 @@ def mixture_terms(mixture: CoordinateMixture) -> np.ndarray:
         log_stay, log_jump, jump_var, jump_log_norm, spread.astype(float)]))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _log_density(x, block, terms, out):
     """out[i] = CoordinateMixture.log_density(x, block)[i] for the mixture ``terms``."""
     with_jumps = False
@@ -115,7 +115,7 @@ def _log_density(x, block, terms, out):
         out[i] = total
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _resample_if_degenerate(rng, samples, previous, log_weights, max_kl):
     """cpf.kl_from_uniform and cpf.systematic_resample: resamples (children inherit
     their parent's values and likelihood) when KL(w || uniform) > max_kl."""
@@ -138,7 +138,7 @@ def _resample_if_degenerate(rng, samples, previous, log_weights, max_kl):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _sweep(rng, samples, block_index, block_start, prior, proposal, proposal_jumps,
            importance, max_kl, factors, parallel, chunks, head, tail, log_weights, previous,
            block_max):

@@ -123,7 +123,7 @@ def _step_pose(X, n, s, q, kind, inboard, outboard, q_index, axis, A, B, rev, T,
         X[o, r, 3] += m3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _body_poses_one(X, n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M):
     for r in range(4):
         for c in range(4):
@@ -137,7 +137,7 @@ def _body_poses_one(X, n, q, kind, inboard, outboard, q_index, axis, A, B, rev, 
         _step_pose(X, n, s, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def _body_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev, out):
     for n in prange(q.shape[0]):
         T = np.empty((4, 4))
@@ -145,7 +145,7 @@ def _body_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev, out
         _body_poses_one(out[n], n, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
 
 
-@njit(cache=True)
+@njit(cache=True)  # no nogil: PoseReadout calls it from the Simulator's thread
 def relative_poses_one(n: int, q: np.ndarray, kind: np.ndarray, inboard: np.ndarray,
                        outboard: np.ndarray, q_index: np.ndarray, axis: np.ndarray,
                        A: np.ndarray, B: np.ndarray, rev: np.ndarray, frame_body: int,
@@ -178,7 +178,7 @@ def relative_poses_one(n: int, q: np.ndarray, kind: np.ndarray, inboard: np.ndar
         Y[b, 3, 3] = 1.0
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def _relative_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev,
                            frame_body, X_BF, out):
     """out[n, b] = inv(X_W_body(frame_body) @ X_BF) @ X_WB[n, b]."""

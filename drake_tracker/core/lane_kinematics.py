@@ -70,7 +70,7 @@ def lane_compose_fixed(typingctx: object, out: types.Type, out_at: types.Type,
     return types.void(out, out_at, p, p_at, q, q_at), _compose_codegen(q_in_lanes=False)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _joint_motion(T, q, first, count, q_index, axis, kind, rev, s):
     """T (12 * LANES): each lane's X_FM of joint step s (the inverse for a reversed
     joint), as kinematics._step_pose builds it; lanes past ``count`` repeat the last."""
@@ -96,7 +96,7 @@ def _joint_motion(T, q, first, count, q_index, axis, kind, rev, s):
             T[k * LANES + lane] = entries[k]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lane_relative_poses(q: np.ndarray, first: int, count: int, kind: np.ndarray,
                         inboard: np.ndarray, outboard: np.ndarray, q_index: np.ndarray,
                         axis: np.ndarray, A: np.ndarray, B: np.ndarray, rev: np.ndarray,

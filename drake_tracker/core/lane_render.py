@@ -47,7 +47,7 @@ def lane_tables(render_tables: tuple) -> tuple:
             radii, planes.reshape(-1, 4), closed)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lane_scratch(num_vertices: int) -> tuple:
     """Scratch arrays of :func:`render_lanes` for meshes of ``num_vertices`` vertices:
     projected vertices (3 x V*LANES), camera-frame vertices of one lane (V, 3), a
@@ -61,7 +61,7 @@ def lane_scratch(num_vertices: int) -> tuple:
             np.zeros(LANES, np.bool_))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def render_lanes(zb: np.ndarray, height: int, width: int, poses: np.ndarray,
                  vertices: np.ndarray, triangles: np.ndarray, part_body: np.ndarray,
                  part_vertex_start: np.ndarray, part_tri_start: np.ndarray,
@@ -141,7 +141,7 @@ def render_lanes(zb: np.ndarray, height: int, width: int, poses: np.ndarray,
                         span)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _near_lanes(t, triangles, vertices, poses, b, Z, near_lane, fast, triangle_fast, P,
                 poly, zb3, fx, fy, cx, cy, near, far, rows, span):
     """For a part that reaches the near plane in some lanes (where render_particle
@@ -168,7 +168,7 @@ def _near_lanes(t, triangles, vertices, poses, b, Z, near_lane, fast, triangle_f
                        poly, rows, span)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def score_pixels(zb: np.ndarray, width: int, rows: np.ndarray, span: np.ndarray,
                  pixel_slot: np.ndarray, table: np.ndarray, uniform: float, lam: float,
                  occlusion: float, truncation: float, offsets: np.ndarray,

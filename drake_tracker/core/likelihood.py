@@ -197,7 +197,7 @@ def coarser_observation(observation: PreparedObservation,
                                pixel_slot=slot, **per_pixel)
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(parallel=True, cache=True, nogil=True)
 def _sum_log_ratios(rendered, index, z, sigma, gauss_coeff, occ_coeff, log_p_occ_inf,
                     uniform, lam, occlusion, truncation):
     num = rendered.shape[0]

@@ -178,7 +178,7 @@ def _raster_xyz(zbuf, x0, y0, z0, x1, y1, z1, x2, y2, z2, fx, fy, cx, cy, near, 
             fx * x2 * iz2 + cx, fy * y2 * iz2 + cy, iz2, near, far, rows, span, SMALL_BOX_PX)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def raster_clipped(zbuf: np.ndarray, P: np.ndarray, triangles: np.ndarray, t_begin: int,
                    t_end: int, fx: float, fy: float, cx: float, cy: float, near: float,
                    far: float, poly: np.ndarray, rows: np.ndarray, span: np.ndarray) -> None:
@@ -228,7 +228,7 @@ def raster_clipped(zbuf: np.ndarray, P: np.ndarray, triangles: np.ndarray, t_beg
                         fx, fy, cx, cy, near, far, rows, span)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def render_particle(zbuf: np.ndarray, X: np.ndarray, vertices: np.ndarray,
                     triangles: np.ndarray, part_body: np.ndarray,
                     part_vertex_start: np.ndarray, part_tri_start: np.ndarray,
@@ -332,7 +332,7 @@ def render_particle(zbuf: np.ndarray, X: np.ndarray, vertices: np.ndarray,
                        rows, span)
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def render_kernel(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
                   part_body: np.ndarray, part_vertex_start: np.ndarray,
                   part_tri_start: np.ndarray, sphere_center: np.ndarray,

@@ -96,7 +96,7 @@ def _score_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, frame
 
 #: The same kernel compiled twice: serial (one thread: no threading layer, no thread
 #: wake-ups, which cost milliseconds on a loaded machine) and parallel over chunks.
-_score_serial, _score_parallel = serial_and_parallel(_score_particles)
+_score_serial, _score_parallel = serial_and_parallel(_score_particles, nogil=True)
 
 
 def num_batch_chunks(n: int) -> int:

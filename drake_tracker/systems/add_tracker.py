@@ -6,7 +6,10 @@ observation), the Kalman bank at ``h/2`` (adopts the buffer's correction, then f
 reading k if the correction did not already include it), and the CPF system at ``3h/4``
 (reads the buffer's prior for a newly arrived image). Every exchange goes through
 state, so there is no algebraic loop, and the bank's estimate after its update equals
-the offline :class:`~drake_tracker.tracker.Tracker`'s after the same reading.
+the offline :class:`~drake_tracker.tracker.Tracker`'s after the same reading, except
+within ``image.update_latency_s`` of an applied image's arrival: the Diagram applies an
+update that much later (it runs on a worker thread meanwhile; the offline tracker
+applies it at once).
 
 The depth input is what a Drake user has: an ``RgbdSensor``'s ``depth_image_32f``
 (metres) or ``depth_image_16u`` (millimetres) with a capture-time port

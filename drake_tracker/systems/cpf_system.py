@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -15,6 +16,7 @@ from drake_tracker.core.health import TrackerHealth, next_health
 from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
 from drake_tracker.core.timestamps import RateLimitedWarning, problem_kind
 from drake_tracker.params import TrackerParams
+from drake_tracker.systems.image_update_worker import submit_image_update
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
 from drake_tracker.systems.shared_state import SharedAbstractState
 
@@ -41,6 +43,18 @@ class CpfState(SharedAbstractState):
     #: Frames not processed: not due (paced at ``min_image_interval_s``), unplaceable,
     #: malformed, or replaced on the port before the system looked.
     images_skipped: int = 0
+    #: The update running on the worker thread (``image.update_latency_s`` > 0).
+    in_flight: ImageUpdateInFlight | None = None
+
+
+@dataclass(frozen=True)
+class ImageUpdateInFlight:
+    """An image update handed to the worker thread, applied at ``due_s``."""
+
+    frame: DepthFrame
+    prior: ImagePrior
+    due_s: float
+    outcome: Future
 
 
 class CpfImageUpdateSystem(LeafSystem):
@@ -65,6 +79,14 @@ class CpfImageUpdateSystem(LeafSystem):
     by one per applied image; ``health`` the :class:`TrackerHealth` after it. The random
     numbers of image ``k`` depend only on (``image.seed``, k). Malformed images, images
     the buffer cannot place and failed updates are skipped with a rate-limited warning.
+
+    With ``image.update_latency_s`` L > 0 the update runs on the image-update thread
+    (``image_update_worker``) while the simulation goes on, and its message appears at the
+    first check L after the image was taken up (the Simulator waits there if the thread
+    is not done), the same message as with L = 0. A due image that comes while an update
+    is in flight applies that one first; an image is taken up only once its prior holds
+    every applied update (``ImagePrior.observation_id``). ``state(context).in_flight``
+    is the running update.
     """
 
     def __init__(self, model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
@@ -75,6 +97,7 @@ class CpfImageUpdateSystem(LeafSystem):
         self.processor = ImageProcessor(model, camera, params)
         self._period_s = float(period_s)
         self._health_params = params.health
+        self._latency_s = float(params.image.update_latency_s)
         self._warnings = RateLimitedWarning(log)
         self._state = self.DeclareAbstractState(AbstractValue.Make(CpfState()))
         self._frame_port = self.DeclareAbstractInputPort(
@@ -96,33 +119,55 @@ class CpfImageUpdateSystem(LeafSystem):
 
     def _update(self, context, state) -> EventStatus | None:
         frame: DepthFrame = self._frame_port.Eval(context)
+        stored, now = self.state(context), context.get_time()
         key = (frame.sequence, repr(frame.capture_time_s))
-        if frame.is_empty or key == self.state(context).last_frame:
-            # No new frame (at 999 of 1000 checks): Drake keeps the state as it is and
-            # recomputes nothing that depends on it.
+        new_frame = not frame.is_empty and key != stored.last_frame
+        job = stored.in_flight
+        if not new_frame and (job is None or now < job.due_s - 1e-9):
+            # No new frame and no result due (at 999 of 1000 checks): Drake keeps the
+            # state as it is and recomputes nothing that depends on it.
             return EventStatus.DidNothing()
-        s = self.state(context).copy()
-        if frame.sequence < s.last_sequence:
-            log.warning("camera sequence counter restarted: image %d after image %d; "
-                        "frames are told apart by sequence and stamp", frame.sequence,
-                        s.last_sequence)
-        elif s.last_sequence >= 0 and frame.sequence - s.last_sequence > 1:
-            missed = frame.sequence - s.last_sequence - 1
-            s.images_skipped += missed
-            self._warnings.warn("frames never seen", (
-                f"{missed} frame(s) before image {frame.sequence} were never on the depth "
-                f"port when it was checked (every {self._period_s * 1e3:g} ms): dropped "
-                f"by the camera, or replaced by a newer one between two checks"))
-        s.last_sequence, s.last_frame = frame.sequence, key
-        if self._process(frame, self._prior_port.Eval(context), s):
-            s.images_applied += 1
-        else:
-            s.images_skipped += 1
+        s = stored.copy()
+        prior = self._prior_port.Eval(context) if new_frame else None
+        if job is not None and (now >= job.due_s - 1e-9 or self._may_be_due(prior, s)):
+            self._count(s, self._finish(job.frame, job.prior, job.outcome, s))
+            s.in_flight = None
+        if new_frame and prior.anchor is not None and prior.observation_id < s.message.id:
+            new_frame = False  # its prior lacks the latest update: the next check takes it
+        if new_frame:
+            if frame.sequence < s.last_sequence:
+                log.warning("camera sequence counter restarted: image %d after image %d; "
+                            "frames are told apart by sequence and stamp", frame.sequence,
+                            s.last_sequence)
+            elif s.last_sequence >= 0 and frame.sequence - s.last_sequence > 1:
+                missed = frame.sequence - s.last_sequence - 1
+                s.images_skipped += missed
+                self._warnings.warn("frames never seen", (
+                    f"{missed} frame(s) before image {frame.sequence} were never on the "
+                    f"depth port when it was checked (every {self._period_s * 1e3:g} ms): "
+                    f"dropped by the camera, or replaced by a newer one between two checks"))
+            s.last_sequence, s.last_frame = frame.sequence, key
+            self._count(s, self._process(frame, prior, s, now))
         state.get_mutable_abstract_state(self._state).set_value(s)
 
-    def _process(self, frame: DepthFrame, prior: ImagePrior, s: CpfState) -> bool:
-        """Runs the image update on ``frame`` if it is due; True when it produced a
-        new observation message."""
+    @staticmethod
+    def _count(s: CpfState, applied: bool | None) -> None:
+        if applied is not None:  # None: started on the worker, counted when it is done
+            s.images_applied += int(applied)
+            s.images_skipped += int(not applied)
+
+    def _may_be_due(self, prior: ImagePrior | None, s: CpfState) -> bool:
+        """Whether the new frame may be due once the update in flight is applied (then
+        that one is applied first, as it would have been without the latency)."""
+        if prior is None or prior.anchor is None:
+            return False
+        latest = max(s.last_applied_image_s, s.in_flight.prior.image_time_s)
+        return self.processor.wants_at(prior.image_time_s, s.next_image_due_s, latest)
+
+    def _process(self, frame: DepthFrame, prior: ImagePrior, s: CpfState,
+                 now_s: float) -> bool | None:
+        """Starts the image update on ``frame`` if it is due: None when it runs on the
+        worker (``s.in_flight``); else whether it produced a new observation message."""
         t = prior.image_time_s
         if prior.sequence == frame.sequence and t == t and not self.processor.wants_at(
                 t, s.next_image_due_s, s.last_applied_image_s):
@@ -131,20 +176,36 @@ class CpfImageUpdateSystem(LeafSystem):
             return self._skip(frame, prior.problem)
         if t >= s.last_applied_image_s:  # an out-of-order image does not pace the rest
             s.next_image_due_s = self.processor.next_due(t, s.next_image_due_s)
+        args = (frame, prior.anchor.prior, jump_window_s(t, s.last_applied_image_s, s.health),
+                s.health)
+        if self._latency_s > 0:
+            outcome = submit_image_update(self.processor.observe, *args)
+            s.in_flight = ImageUpdateInFlight(frame, prior, now_s + self._latency_s, outcome)
+            return None
+        outcome = Future()
         try:
-            window = jump_window_s(t, s.last_applied_image_s, s.health)
-            outcome = self.processor.observe(frame, prior.anchor.prior, window, s.health)
+            outcome.set_result(self.processor.observe(*args))
+        except Exception as err:  # one failed image never stops the simulation
+            outcome.set_exception(err)
+        return self._finish(frame, prior, outcome, s)
+
+    def _finish(self, frame: DepthFrame, prior: ImagePrior, outcome: Future,
+                s: CpfState) -> bool:
+        """Applies a finished update (waiting for it if it is still running); True when
+        it produced a new observation message."""
+        try:
+            outcome = outcome.result()
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(frame, f"{type(err).__name__}: {err}")
+        t = prior.image_time_s
         if outcome.observation is None and outcome.consistency is not None:
             s.health = next_health(s.health, outcome.consistency, self._health_params,
                                    challenger=outcome.challenger)
             return self._skip(frame, outcome.skip_reason)
         if outcome.observation is None:
             return self._skip(frame, "no valid depth pixel")
-        s.message = ImageObservationMessage(s.message.id + 1, frame.sequence,
-                                            prior.image_time_s, outcome.observation,
-                                            prior.anchor)
+        s.message = ImageObservationMessage(s.message.id + 1, frame.sequence, t,
+                                            outcome.observation, prior.anchor)
         s.health = next_health(s.health, outcome.consistency, self._health_params,
                                outcome.restarted, outcome.misplaced, outcome.challenger)
         s.last_applied_image_s = max(t, s.last_applied_image_s)

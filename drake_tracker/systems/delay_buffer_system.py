@@ -201,4 +201,5 @@ class DelayBufferSystem(LeafSystem):
         t = decision.time_s
         problem = s.buffer.image_time_problem(t) or s.buffer.reading_gap_problem(t)
         anchor = None if problem else s.buffer.image_anchor(t)
-        output.set_value(ImagePrior(frame.sequence, t, anchor, problem or ""))
+        output.set_value(ImagePrior(frame.sequence, t, anchor, problem or "",
+                                    s.last_observation_id))

@@ -34,6 +34,8 @@ class ImagePrior:
     image_time_s: float = float("nan")
     anchor: ImageAnchor | None = None
     problem: str = "no image"
+    #: The id of the last image observation the buffer has taken in (it is in ``anchor``).
+    observation_id: int = 0
 
 
 @dataclass

@@ -1,0 +1,48 @@
+"""The thread that runs image updates while a Drake Simulator goes on.
+
+The paper runs its two filters in parallel, at their own rates: an image's update takes
+tens of milliseconds, and the joint filter does not wait for it. In a Diagram the
+:class:`~drake_tracker.systems.cpf_system.CpfImageUpdateSystem` models that with
+``image.update_latency_s``: it hands the update to this worker when the image arrives
+and applies the result that much simulated time later (waiting for it there if it is
+not done). The result does not depend on how fast the worker was, so a simulation stays
+deterministic, and on a machine with two cores the update overlaps the rest of the
+simulation.
+
+One worker thread serves every tracker of the process, so the compiled kernels are
+never entered from two threads at once (numba's ``workqueue`` layer does not allow
+it), and it runs them on one numba thread: the other core is the Simulator's.
+"""
+
+from __future__ import annotations
+
+import atexit
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any
+
+import numba
+
+_lock = threading.Lock()
+_executor: ThreadPoolExecutor | None = None
+
+
+def _one_numba_thread() -> None:
+    # numba's thread count is per calling thread: this one runs its kernels serially.
+    numba.set_num_threads(1)
+
+
+def _worker() -> ThreadPoolExecutor:
+    global _executor
+    with _lock:
+        if _executor is None:
+            _executor = ThreadPoolExecutor(max_workers=1, initializer=_one_numba_thread,
+                                           thread_name_prefix="drake_tracker_image_update")
+            atexit.register(_executor.shutdown, wait=False, cancel_futures=True)
+        return _executor
+
+
+def submit_image_update(function: Callable[..., Any], *args: Any) -> Future:
+    """Runs ``function(*args)`` on the image-update thread; its Future."""
+    return _worker().submit(function, *args)
