@@ -288,10 +288,29 @@ def test_cpf_system_applies_a_worker_update_after_its_latency_with_the_same_resu
     simulator.AdvanceTo(0.015)
     s = context.get_abstract_state(0).get_value()
     assert s.message.id == 1 and s.message.sequence == 0 and s.in_flight is None
-    # Image 1 waits until the buffer has taken image 0's update into its prior.
-    simulator.AdvanceTo(0.025)
-    assert context.get_abstract_state(0).get_value().in_flight is None
+    # Image 1 is put off until the buffer has taken image 0's update into its prior.
     system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.01, anchor, "", 1))
-    simulator.AdvanceTo(0.035)
+    simulator.AdvanceTo(0.025)
     s = context.get_abstract_state(0).get_value()
-    assert s.in_flight.frame.sequence == 1 and s.in_flight.due_s == pytest.approx(0.08)
+    assert s.in_flight.frame.sequence == 1 and s.in_flight.due_s == pytest.approx(0.07)
+
+
+def test_cpf_system_warns_when_the_prior_never_takes_in_its_updates(apollo, caplog):
+    """A prior port that is not the buffer fed by image_observation: the frame is put
+    off for one check, then used with a warning (never stalled in silence)."""
+    import logging
+
+    from drake_tracker.systems.messages import ImagePrior
+
+    p = params()
+    p.image.min_image_interval_s = 0.0
+    system, context, frame, anchor = _cpf_system_with_a_frame(apollo, p)
+    simulator = Simulator(system, context)
+    simulator.AdvanceTo(0.1)  # image 0's update is applied at 0.08 s
+    assert context.get_abstract_state(0).get_value().message.id == 1
+    system.GetInputPort("depth_frame").FixValue(context, DepthFrame(0.1, 0.1, frame.depth_m, 1))
+    system.GetInputPort("image_prior").FixValue(context, ImagePrior(1, 0.1, anchor, ""))
+    with caplog.at_level(logging.WARNING):
+        simulator.AdvanceTo(0.125)
+    assert "holds image updates up to 0, not 1" in caplog.text
+    assert context.get_abstract_state(0).get_value().in_flight.frame.sequence == 1

@@ -45,6 +45,8 @@ class CpfState(SharedAbstractState):
     images_skipped: int = 0
     #: The update running on the worker thread (``image.update_latency_s`` > 0).
     in_flight: ImageUpdateInFlight | None = None
+    #: A frame put off for a check, until its prior holds the latest update.
+    deferred_frame: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -133,7 +135,13 @@ class CpfImageUpdateSystem(LeafSystem):
             self._count(s, self._finish(job.frame, job.prior, job.outcome, s))
             s.in_flight = None
         if new_frame and prior.anchor is not None and prior.observation_id < s.message.id:
-            new_frame = False  # its prior lacks the latest update: the next check takes it
+            if s.deferred_frame != key:  # its prior lacks the latest update: look again
+                s.deferred_frame, new_frame = key, False
+            else:  # still: the prior does not come from a buffer that takes them in
+                self._warnings.warn("prior without the latest update", (
+                    f"image {frame.sequence}'s prior holds image updates up to "
+                    f"{prior.observation_id}, not {s.message.id}: is image_observation "
+                    f"connected to the buffer that sends image_prior? Used as it is"))
         if new_frame:
             if frame.sequence < s.last_sequence:
                 log.warning("camera sequence counter restarted: image %d after image %d; "
