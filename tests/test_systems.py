@@ -314,3 +314,22 @@ def test_cpf_system_warns_when_the_prior_never_takes_in_its_updates(apollo, capl
         simulator.AdvanceTo(0.125)
     assert "holds image updates up to 0, not 1" in caplog.text
     assert context.get_abstract_state(0).get_value().in_flight.frame.sequence == 1
+
+
+def test_the_image_update_worker_runs_in_a_forked_child():
+    """A child forked after the worker started gets a worker of its own (the parent's
+    thread does not exist in it: without one, its updates would wait forever)."""
+    import multiprocessing
+
+    from drake_tracker.systems.image_update_worker import submit_image_update
+
+    assert submit_image_update(pow, 2, 10).result(timeout=10) == 1024
+    context = multiprocessing.get_context("fork")
+    with context.Pool(1) as pool:
+        assert pool.apply_async(_in_child).get(timeout=60) == 1024
+
+
+def _in_child() -> int:
+    from drake_tracker.systems.image_update_worker import submit_image_update
+
+    return submit_image_update(pow, 2, 10).result(timeout=10)

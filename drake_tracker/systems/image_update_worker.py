@@ -17,6 +17,7 @@ it), and it runs them on one numba thread: the other core is the Simulator's.
 from __future__ import annotations
 
 import atexit
+import os
 import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -41,6 +42,15 @@ def _worker() -> ThreadPoolExecutor:
                                            thread_name_prefix="drake_tracker_image_update")
             atexit.register(_executor.shutdown, wait=False, cancel_futures=True)
         return _executor
+
+
+def _forget_in_child() -> None:
+    # A forked child has the executor but not its thread: it would queue work forever.
+    global _executor, _lock
+    _executor, _lock = None, threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_in_child)
 
 
 def submit_image_update(function: Callable[..., Any], *args: Any) -> Future:
