@@ -153,3 +153,37 @@ def test_the_scoring_kernels_have_cache_files_of_their_own():
     serial, parallel = render_likelihood._score_serial, render_likelihood._score_parallel
     assert parallel.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
     assert serial.py_func.__qualname__ != parallel.py_func.__qualname__
+
+
+def test_probes_that_confirm_the_choice_come_ever_more_rarely():
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        return
+    previous = numba.get_num_threads()
+    numba.set_num_threads(2)
+    try:
+        policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0,
+                                  max_probe_every=16)
+        policy.use_parallel()
+        policy.record(False, 1.0, 10)
+        policy.use_parallel()
+        policy.record(True, 2.0, 10)  # parallel is the dearer
+
+        def calls_until_a_probe() -> int:
+            for n in range(1, 100):
+                parallel = policy.use_parallel()
+                policy.record(parallel, 2.0 if parallel else 1.0, 10)
+                if parallel:
+                    return n
+            return -1
+
+        gaps = [calls_until_a_probe() for _ in range(5)]
+        assert 1 <= gaps[0] <= 4 and gaps[1:] == [8, 16, 16, 16]
+        # The load changes: the next probe finds parallel cheaper, and uses it.
+        for _ in range(15):
+            assert policy.use_parallel() is False
+            policy.record(False, 1.0, 10)
+        assert policy.use_parallel() is True
+        policy.record(True, 0.5, 10)
+        assert policy.probe_interval == 4 and policy.use_parallel() is True
+    finally:
+        numba.set_num_threads(previous)
