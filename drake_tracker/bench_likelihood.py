@@ -131,6 +131,33 @@ def time_updates_by_threads(update: CpfImageUpdate, observation: PreparedObserva
     return {str(t): _best(update, timed[t]) for t in threads}
 
 
+def kernel_us_per_evaluation_in_turns(models: dict[str, TrackerModel],
+                                      camera: CameraIntrinsics, params: TrackerParams,
+                                      repeats: int) -> dict[str, float]:
+    """µs in the scoring kernel per likelihood evaluation of each model's image update
+    (1 thread, the least of ``repeats``), the models taking turns update by update, so
+    that a ratio of two is not this shared machine's drift between two blocks of timing
+    (the CAD ÷ bench ratio moved from 1.24 to 2.09 between separately timed runs)."""
+    cases = {}
+    for name, model in models.items():
+        update = make_update(model, camera, params)
+        cases[name] = (update, test_observation(update), tracking_prior(model))
+    previous = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        rng = np.random.default_rng(0)
+        for update, observation, prior in cases.values():
+            update(prior, observation, rng)  # warm-up (and compile)
+        kernel_s = {name: [] for name in cases}
+        for _ in range(max(1, repeats)):
+            for name, (update, observation, prior) in cases.items():
+                kernel_s[name].append(_timed_update(update, observation, prior, rng)[2])
+    finally:
+        numba.set_num_threads(previous)
+    return {name: 1e6 * min(kernel_s[name]) / cases[name][0].evaluations_per_image
+            for name in cases}
+
+
 def bench_robot(model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
                 repeats: int = 5, num_drake: int = 30, threads: tuple[int, ...] = (1, 2)) -> dict:
     """The figures of the module docstring for one robot (``camera``: full resolution)."""
