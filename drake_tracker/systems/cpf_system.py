@@ -125,13 +125,14 @@ class CpfImageUpdateSystem(LeafSystem):
         key = (frame.sequence, repr(frame.capture_time_s))
         new_frame = not frame.is_empty and key != stored.last_frame
         job = stored.in_flight
-        if not new_frame and (job is None or now < job.due_s - 1e-9):
+        result_due = job is not None and now >= job.due_s - 1e-9
+        if not new_frame and not result_due:
             # No new frame and no result due (at 999 of 1000 checks): Drake keeps the
             # state as it is and recomputes nothing that depends on it.
             return EventStatus.DidNothing()
         s = stored.copy()
         prior = self._prior_port.Eval(context) if new_frame else None
-        if job is not None and (now >= job.due_s - 1e-9 or self._may_be_due(prior, s)):
+        if result_due or (job is not None and self._may_be_due(prior, s)):
             self._count(s, self._finish(job.frame, job.prior, job.outcome, s))
             s.in_flight = None
         if new_frame and prior.anchor is not None and prior.observation_id < s.message.id:
