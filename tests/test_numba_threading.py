@@ -2,12 +2,24 @@
 
 import numba
 import numpy as np
+import pytest
 
 from drake_tracker.core.numba_threading import (
     DEFAULT_THREADING_LAYER,
     SerialOrParallel,
     configure_threading_layer,
 )
+
+
+@pytest.fixture
+def two_numba_threads():
+    """Two numba threads for the test (skipped where numba has one), restored after."""
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here: the policy is always serial")
+    previous = numba.get_num_threads()
+    numba.set_num_threads(2)
+    yield
+    numba.set_num_threads(previous)
 
 
 def test_user_environment_wins_over_the_default(monkeypatch):
@@ -18,44 +30,30 @@ def test_user_environment_wins_over_the_default(monkeypatch):
                                            str(numba.config.THREADING_LAYER))
 
 
-def test_policy_measures_both_then_uses_the_cheaper_and_reprobes():
-    if numba.config.NUMBA_NUM_THREADS < 2:
-        return  # one thread: always serial (checked below)
-    previous = numba.get_num_threads()
-    numba.set_num_threads(2)
-    try:
-        policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0)
-        assert policy.use_parallel() is False  # nothing measured: serial first
-        policy.record(False, 1.0, 10)
-        assert policy.use_parallel() is True  # then parallel, once
-        policy.record(True, 3.0, 10)  # parallel 3x slower (a loaded machine)
-        choices = [policy.use_parallel() for _ in range(8)]
-        assert choices.count(True) == 2  # only the probes
-        policy.record(True, 0.2, 10)  # the load went away
-        assert [policy.use_parallel() for _ in range(3)].count(True) >= 2
-    finally:
-        numba.set_num_threads(previous)
+def test_policy_measures_both_then_uses_the_cheaper_and_reprobes(two_numba_threads):
+    policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0)
+    assert policy.use_parallel() is False  # nothing measured: serial first
+    policy.record(False, 1.0, 10)
+    assert policy.use_parallel() is True  # then parallel, once
+    policy.record(True, 3.0, 10)  # parallel 3x slower (a loaded machine)
+    choices = [policy.use_parallel() for _ in range(8)]
+    assert choices.count(True) == 2  # only the probes
+    policy.record(True, 0.2, 10)  # the load went away
+    assert [policy.use_parallel() for _ in range(3)].count(True) >= 2
 
 
-def test_the_first_call_of_each_compilation_is_not_measured():
-    if numba.config.NUMBA_NUM_THREADS < 2:
-        return
-    previous = numba.get_num_threads()
-    numba.set_num_threads(2)
-    try:
-        policy = SerialOrParallel(smoothing=1.0, warmup_calls=1)
-        assert policy.use_parallel() is False
-        policy.record(False, 5.0, 10)  # compiles / loads: not measured
-        assert policy.use_parallel() is False and policy.cost_per_item[False] is None
-        policy.record(False, 1.0, 10)
-        assert policy.use_parallel() is True
-        policy.record(True, 50.0, 10)  # starts the threads: not measured
-        assert policy.use_parallel() is True
-        policy.record(True, 0.6, 10)
-        assert policy.cost_per_item == {False: 0.1, True: 0.06}
-        assert policy.use_parallel() is True
-    finally:
-        numba.set_num_threads(previous)
+def test_the_first_call_of_each_compilation_is_not_measured(two_numba_threads):
+    policy = SerialOrParallel(smoothing=1.0, warmup_calls=1)
+    assert policy.use_parallel() is False
+    policy.record(False, 5.0, 10)  # compiles / loads: not measured
+    assert policy.use_parallel() is False and policy.cost_per_item[False] is None
+    policy.record(False, 1.0, 10)
+    assert policy.use_parallel() is True
+    policy.record(True, 50.0, 10)  # starts the threads: not measured
+    assert policy.use_parallel() is True
+    policy.record(True, 0.6, 10)
+    assert policy.cost_per_item == {False: 0.1, True: 0.06}
+    assert policy.use_parallel() is True
 
 
 def test_one_thread_is_always_serial():
@@ -155,35 +153,28 @@ def test_the_scoring_kernels_have_cache_files_of_their_own():
     assert serial.py_func.__qualname__ != parallel.py_func.__qualname__
 
 
-def test_probes_that_confirm_the_choice_come_ever_more_rarely():
-    if numba.config.NUMBA_NUM_THREADS < 2:
-        return
-    previous = numba.get_num_threads()
-    numba.set_num_threads(2)
-    try:
-        policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0,
-                                  max_probe_every=16)
-        policy.use_parallel()
+def test_probes_that_confirm_the_choice_come_ever_more_rarely(two_numba_threads):
+    policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0,
+                              max_probe_every=16)
+    policy.use_parallel()
+    policy.record(False, 1.0, 10)
+    policy.use_parallel()
+    policy.record(True, 2.0, 10)  # parallel is the dearer
+
+    def calls_until_a_probe() -> int:
+        for n in range(1, 100):
+            parallel = policy.use_parallel()
+            policy.record(parallel, 2.0 if parallel else 1.0, 10)
+            if parallel:
+                return n
+        return -1
+
+    gaps = [calls_until_a_probe() for _ in range(5)]
+    assert 1 <= gaps[0] <= 4 and gaps[1:] == [8, 16, 16, 16]
+    # The load changes: the next probe finds parallel cheaper, and uses it.
+    for _ in range(15):
+        assert policy.use_parallel() is False
         policy.record(False, 1.0, 10)
-        policy.use_parallel()
-        policy.record(True, 2.0, 10)  # parallel is the dearer
-
-        def calls_until_a_probe() -> int:
-            for n in range(1, 100):
-                parallel = policy.use_parallel()
-                policy.record(parallel, 2.0 if parallel else 1.0, 10)
-                if parallel:
-                    return n
-            return -1
-
-        gaps = [calls_until_a_probe() for _ in range(5)]
-        assert 1 <= gaps[0] <= 4 and gaps[1:] == [8, 16, 16, 16]
-        # The load changes: the next probe finds parallel cheaper, and uses it.
-        for _ in range(15):
-            assert policy.use_parallel() is False
-            policy.record(False, 1.0, 10)
-        assert policy.use_parallel() is True
-        policy.record(True, 0.5, 10)
-        assert policy.probe_interval == 4 and policy.use_parallel() is True
-    finally:
-        numba.set_num_threads(previous)
+    assert policy.use_parallel() is True
+    policy.record(True, 0.5, 10)
+    assert policy.probe_interval == 4 and policy.use_parallel() is True
