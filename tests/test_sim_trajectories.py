@@ -111,3 +111,34 @@ def test_sinusoid_equals_its_joint_by_joint_formula_bit_for_bit(joints):
                                       _plain_sinusoid(traj, times[:count]))
     traj.period_s = 1.3  # the cached periods follow a change
     np.testing.assert_array_equal(traj.positions(times), _plain_sinusoid(traj, times))
+
+
+def _plain_free(traj, t):
+    """The free motion's formula joint by joint, sum by sum (what ``positions`` computes
+    for all moved joints at once)."""
+    t = np.atleast_1d(np.asarray(t, float))
+    q = np.tile(traj.home, (len(t), 1))
+    for k, j in enumerate(traj.moved):
+        for m in range(traj.freqs.shape[1]):
+            q[:, j] += traj.amplitude * traj.weights[k, m] * np.sin(
+                2 * np.pi * (t * traj.freqs[k, m]) + traj.phases[k, m])
+    if traj.kind == "in-out-in" and traj.excursion_index >= 0:
+        q[:, traj.excursion_index] += traj.excursion * smooth_window(t, *traj.excursion_window)
+    return q
+
+
+@pytest.mark.parametrize(("kind", "joints"), [("free", []), ("free", ["j0", "j2"]),
+                                              ("free", ["j1", "j1", "j2"]),
+                                              ("in-out-in", ["j0", "j1"])])
+def test_free_motion_equals_its_joint_by_joint_formula(kind, joints):
+    config = TrajectoryConfig(kind=kind, joints=joints, amplitude_deg=17.0, speed_scale=1.7,
+                              excursion_joint="j2", excursion_start_s=1.0,
+                              excursion_duration_s=2.0, excursion_ramp_s=0.5)
+    traj = make_joint_trajectory(config, NAMES, None, seed=3)
+    times = np.concatenate([np.arange(0.0, 5.0, 1e-3),
+                            np.random.default_rng(2).uniform(-5.0, 1e3, 500)])
+    for t in times[::97]:  # one time at a time, as the simulated encoders ask
+        np.testing.assert_allclose(traj.positions(t), _plain_free(traj, t), rtol=0,
+                                   atol=1e-15)  # the same sines, summed in another order
+    np.testing.assert_allclose(traj.positions(times), _plain_free(traj, times), rtol=0,
+                               atol=1e-15)

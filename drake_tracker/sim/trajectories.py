@@ -81,13 +81,18 @@ class JointTrajectory:
                 q[:, moved] += terms
             else:  # a joint listed twice moves by both of its sinusoids
                 np.add.at(q, (slice(None), moved), terms)
-        elif self.kind in ("free", "in-out-in"):
-            for k, j in enumerate(self.moved):
-                arg = 2 * np.pi * np.outer(t, self.freqs[k]) + self.phases[k]
-                q[:, j] += self.amplitude * (np.sin(arg) @ self.weights[k])
-            if self.kind == "in-out-in" and self.excursion_index >= 0:
-                q[:, self.excursion_index] += self.excursion * smooth_window(
-                    t, *self.excursion_window)
+        elif self.kind in ("free", "in-out-in") and len(self.moved):
+            # Moved joint k: amplitude * sum_m w_km sin(2 pi f_km t + phi_km), all k at once
+            # (the encoders read it 1000 times a simulated second).
+            arg = 2 * np.pi * (t[:, None, None] * self.freqs) + self.phases
+            terms = self.amplitude * np.einsum("tkm,km->tk", np.sin(arg), self.weights)
+            if self._sinusoids()[3]:  # no joint listed twice
+                q[:, self.moved] += terms
+            else:  # a joint listed twice moves by both of its sums
+                np.add.at(q, (slice(None), self.moved), terms)
+        if self.kind == "in-out-in" and self.excursion_index >= 0:
+            q[:, self.excursion_index] += self.excursion * smooth_window(
+                t, *self.excursion_window)
         return q
 
     def _sinusoids(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
