@@ -29,7 +29,12 @@ Keys of ``bench.json``:
   tracker reads): ``real_time_factor`` over the whole slice (the first second includes
   the start-up acquisition, 150 particles per block), ``real_time_factor_after_1s``,
   and ``real_time_factor_cpu`` (simulated seconds per second of the process's CPU
-  time, which a loaded machine does not inflate).
+  time, which a loaded machine does not inflate);
+* ``tracker_alone``: the tracker's Diagram alone (``AddTracker`` with the defaults) fed
+  by the demo's sensors recorded beforehand (``RecordedRunSource``), as on a robot whose
+  sensors come from hardware: its real-time factor after the first second, CPU seconds
+  per simulated second in the Simulator's thread and in the other threads (the image
+  update's worker), images applied per second and the median wall time of an update.
 """
 
 from __future__ import annotations
@@ -142,6 +147,49 @@ def bench_demo(params: TrackerParams, duration_s: float) -> dict:
             "real_time_factor_cpu": run.duration_s / (cpu_end - marks[0][2])}
 
 
+def bench_tracker_alone(params: TrackerParams, duration_s: float) -> dict:
+    """The tracker's Diagram alone on the demo's recorded sensors (see the module doc)."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder, LeafSystem
+
+    from drake_tracker.demo import DEFAULT_SCENARIO, render_what_the_tracker_reads
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario import load_scenario
+    from drake_tracker.systems.add_tracker import AddTracker
+    from drake_tracker.systems.recorded_run_source import RecordedRunSource
+
+    scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
+    run = simulate_and_record(scenario, duration_s=duration_s,
+                              image_stride=scenario.camera.render_stride, validate=False)
+    model = build_tracker_model(scenario.resolved_robot_config())
+    builder = DiagramBuilder()
+    source = builder.AddSystem(RecordedRunSource(run))
+    tracker = AddTracker(builder, model, run.camera_intrinsics, params,
+                         source.GetOutputPort("measured_position"),
+                         source.GetOutputPort("measurement_time"),
+                         source.GetOutputPort("depth_frame"),
+                         encoder_period_s=float(np.median(np.diff(run.reading_times_s))))
+    marks = []  # (simulated s, wall s, this thread's CPU s, the process's CPU s)
+    clock = builder.AddNamedSystem("bench_clock", LeafSystem())
+    clock.DeclarePeriodicPublishEvent(1.0, 0.0, lambda context: marks.append(
+        (context.get_time(), time.perf_counter(), time.thread_time(), time.process_time())))
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(run.duration_s)
+    end = (time.perf_counter(), time.thread_time(), time.process_time())
+    start = next(m for m in marks if m[0] == 1.0)
+    span = run.duration_s - 1.0
+    cpf = tracker.image_update
+    state = cpf.state(cpf.GetMyContextFromRoot(simulator.get_context()))
+    updates = list(cpf.processor.update.times.per_update)
+    main_cpu = (end[1] - start[2]) / span
+    return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s,
+            "real_time_factor_after_1s": span / (end[0] - start[1]),
+            "main_thread_cpu_s_per_s": main_cpu,
+            "other_threads_cpu_s_per_s": (end[2] - start[3]) / span - main_cpu,
+            "images_applied_per_s": state.images_applied / run.duration_s,
+            "update_wall_ms_median": 1e3 * float(np.median(updates)) if updates else None}
+
+
 def run_benchmarks(quick: bool = False) -> dict:
     """All figures of ``bench.json`` (see the module docstring)."""
     from drake_tracker.bench_likelihood import bench_robot, kernel_us_per_evaluation_in_turns
@@ -164,6 +212,7 @@ def run_benchmarks(quick: bool = False) -> dict:
                                 repeats)
     kalman = bench_kalman(apollo, params)
     demo = bench_demo(params, 2.0 if quick else 4.0)
+    alone = bench_tracker_alone(params, 3.0 if quick else 6.0)
     bench, cad = results["apollo"], results["apollo_cad"]
     size = camera.subsampled(bench_stride(camera, params))
     return {
@@ -184,6 +233,7 @@ def run_benchmarks(quick: bool = False) -> dict:
         "kf_step_us": kalman["kf_step_us"],
         "replay_us_per_reading": kalman["replay_us_per_reading"],
         "demo": demo,
+        "tracker_alone": alone,
     }
 
 
@@ -248,6 +298,7 @@ def format_bench(result: dict) -> str:
         f"replay: {result['replay_us_per_reading']:.2f} us per re-filtered reading",
     ]
     lines.append(format_demo(result["demo"]))
+    lines.append(format_tracker_alone(result["tracker_alone"]))
     return "\n".join(lines)
 
 
@@ -258,6 +309,18 @@ def format_demo(demo: dict) -> str:
     return (f"demo real-time factor ({demo['scenario']}, first {demo['duration_s']:g} s "
             f"simulated): {demo['real_time_factor']:.2f} wall-clock{after}, "
             f"{demo['real_time_factor_cpu']:.2f} per second of CPU time   (target >= 1.0)")
+
+
+def format_tracker_alone(alone: dict) -> str:
+    """Two lines: the tracker alone on recorded sensors (:func:`bench_tracker_alone`)."""
+    update = alone["update_wall_ms_median"]
+    update = "no update" if update is None else f"{update:.0f} ms of wall time each"
+    return (f"tracker alone on the demo's recorded sensors (first {alone['duration_s']:g} s): "
+            f"real-time factor {alone['real_time_factor_after_1s']:.2f} after the first "
+            f"second\n  CPU s per s: the Simulator's thread "
+            f"{alone['main_thread_cpu_s_per_s']:.2f}, the other threads (the image "
+            f"update's worker) {alone['other_threads_cpu_s_per_s']:.2f}; "
+            f"{alone['images_applied_per_s']:.1f} images applied per s, {update}")
 
 
 def run_bench(args: argparse.Namespace) -> int:

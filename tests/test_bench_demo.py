@@ -3,7 +3,7 @@ assertions: the figures themselves go in the README)."""
 
 import math
 
-from drake_tracker.bench import bench_demo, format_demo
+from drake_tracker.bench import bench_demo, bench_tracker_alone, format_demo, format_tracker_alone
 from drake_tracker.core.camera import stride_for_width
 from drake_tracker.params import TrackerParams
 
@@ -20,3 +20,18 @@ def test_bench_demo_reports_its_real_time_factors():
     assert result["real_time_factor_after_1s"] is None  # the slice is under 1.5 s
     line = format_demo(result)
     assert "demo real-time factor" in line and "target >= 1.0" in line
+
+
+def test_bench_tracker_alone_reports_the_tracker_on_recorded_sensors():
+    params = TrackerParams()
+    result = bench_tracker_alone(params, duration_s=1.6)
+    assert result["scenario"] == "s-full-arm/constant" and result["duration_s"] == 1.6
+    for key in ("real_time_factor_after_1s", "main_thread_cpu_s_per_s",
+                "other_threads_cpu_s_per_s", "update_wall_ms_median"):
+        assert math.isfinite(result[key]) and result[key] > 0, key
+    # Images are taken up at most every image.min_image_interval_s (0.1 s: 10 a second),
+    # and the recorded camera's do reach the tracker.
+    rate = result["images_applied_per_s"]
+    assert 0 < rate <= 1.0 / params.image.min_image_interval_s + 1.0 / result["duration_s"]
+    text = format_tracker_alone(result)
+    assert "tracker alone" in text and "images applied per s" in text
