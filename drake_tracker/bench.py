@@ -34,7 +34,9 @@ Keys of ``bench.json``:
   by the demo's sensors recorded beforehand (``RecordedRunSource``), as on a robot whose
   sensors come from hardware: its real-time factor after the first second, CPU seconds
   per simulated second in the Simulator's thread and in the other threads (the image
-  update's worker), images applied per second and the median wall time of an update.
+  update's worker), images applied per second, the median wall time of an update, and
+  how many updates were not done at their deadline (``CpfImageUpdateSystem.
+  deadline_waits``) with the Simulator's wait per simulated second.
 """
 
 from __future__ import annotations
@@ -182,12 +184,15 @@ def bench_tracker_alone(params: TrackerParams, duration_s: float) -> dict:
     state = cpf.state(cpf.GetMyContextFromRoot(simulator.get_context()))
     updates = list(cpf.processor.update.times.per_update)
     main_cpu = (end[1] - start[2]) / span
+    waits = cpf.deadline_waits
     return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s,
             "real_time_factor_after_1s": span / (end[0] - start[1]),
             "main_thread_cpu_s_per_s": main_cpu,
             "other_threads_cpu_s_per_s": (end[2] - start[3]) / span - main_cpu,
             "images_applied_per_s": state.images_applied / run.duration_s,
-            "update_wall_ms_median": 1e3 * float(np.median(updates)) if updates else None}
+            "update_wall_ms_median": 1e3 * float(np.median(updates)) if updates else None,
+            "updates_late": waits.late, "updates_on_time": waits.on_time,
+            "deadline_wait_s_per_s": waits.waited_s / run.duration_s}
 
 
 def run_benchmarks(quick: bool = False) -> dict:
@@ -320,7 +325,9 @@ def format_tracker_alone(alone: dict) -> str:
             f"second\n  CPU s per s: the Simulator's thread "
             f"{alone['main_thread_cpu_s_per_s']:.2f}, the other threads (the image "
             f"update's worker) {alone['other_threads_cpu_s_per_s']:.2f}; "
-            f"{alone['images_applied_per_s']:.1f} images applied per s, {update}")
+            f"{alone['images_applied_per_s']:.1f} images applied per s, {update}; "
+            f"{alone['updates_late']} of {alone['updates_late'] + alone['updates_on_time']} "
+            f"late at their deadline, {alone['deadline_wait_s_per_s']:.2f} s waited per s")
 
 
 def run_bench(args: argparse.Namespace) -> int:

@@ -295,6 +295,63 @@ def test_cpf_system_applies_a_worker_update_after_its_latency_with_the_same_resu
     assert s.in_flight.frame.sequence == 1 and s.in_flight.due_s == pytest.approx(0.07)
 
 
+def test_deadline_waits_count_done_and_late_updates_and_what_they_raise():
+    import threading
+    import time
+    from concurrent.futures import Future
+
+    from drake_tracker.systems.image_update_worker import DeadlineWaits
+
+    waits = DeadlineWaits()
+    done = Future()
+    done.set_result(7)
+    assert waits.join(done) == 7 and (waits.on_time, waits.late, waits.waited_s) == (1, 0, 0.0)
+    for value in (8, ValueError("update failed")):
+        slow = Future()
+
+        def finish(future=slow, value=value):
+            time.sleep(0.05)
+            if isinstance(value, Exception):
+                future.set_exception(value)
+            else:
+                future.set_result(value)
+
+        threading.Thread(target=finish).start()
+        if isinstance(value, Exception):
+            with pytest.raises(ValueError, match="update failed"):
+                waits.join(slow)
+        else:
+            assert waits.join(slow) == 8
+    assert waits.on_time == 1 and waits.late == 2 and waits.waited_s >= 0.09
+
+
+@pytest.mark.parametrize("latency_s", [0.0, 0.01])
+def test_cpf_system_counts_the_updates_its_deadline_waited_for(apollo, latency_s):
+    """An update slower than the simulated latency (0.2 s of wall time here, while the
+    Simulator reaches its deadline at once) is counted late, with the wait; at
+    ``update_latency_s`` 0 nothing runs on the worker and nothing is counted."""
+    import time
+
+    p = params()
+    p.image.update_latency_s = latency_s
+    system, context, frame, anchor = _cpf_system_with_a_frame(apollo, p)
+    observe = system.processor.observe
+
+    def slow_observe(*args):
+        time.sleep(0.2)
+        return observe(*args)
+
+    system.processor.observe = slow_observe
+    Simulator(system, context).AdvanceTo(0.025)
+    s = context.get_abstract_state(0).get_value()
+    assert s.message.id == 1 and s.in_flight is None
+    waits = system.deadline_waits
+    if latency_s == 0:
+        assert (waits.on_time, waits.late, waits.waited_s) == (0, 0, 0.0)
+    else:
+        assert waits.on_time == 0 and waits.late == 1 and waits.waited_s >= 0.15
+
+
 def test_cpf_system_warns_when_the_prior_never_takes_in_its_updates(apollo, caplog):
     """A prior port that is not the buffer fed by image_observation: the frame is put
     off for one check, then used with a warning (never stalled in silence)."""

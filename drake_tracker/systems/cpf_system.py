@@ -16,7 +16,7 @@ from drake_tracker.core.health import TrackerHealth, next_health
 from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
 from drake_tracker.core.timestamps import RateLimitedWarning, problem_kind
 from drake_tracker.params import TrackerParams
-from drake_tracker.systems.image_update_worker import submit_image_update
+from drake_tracker.systems.image_update_worker import DeadlineWaits, submit_image_update
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
 from drake_tracker.systems.shared_state import SharedAbstractState
 
@@ -85,7 +85,8 @@ class CpfImageUpdateSystem(LeafSystem):
     With ``image.update_latency_s`` L > 0 the update runs on the image-update thread
     (``image_update_worker``) while the simulation goes on, and its message appears at the
     first check L after the image was taken up (the Simulator waits there if the thread
-    is not done), the same message as with L = 0. A due image that comes while an update
+    is not done: ``deadline_waits`` counts how often, and how long), the same message
+    as with L = 0. A due image that comes while an update
     is in flight applies that one first; an image is taken up only once its prior holds
     every applied update (``ImagePrior.observation_id``). ``state(context).in_flight``
     is the running update.
@@ -100,6 +101,8 @@ class CpfImageUpdateSystem(LeafSystem):
         self._period_s = float(period_s)
         self._health_params = params.health
         self._latency_s = float(params.image.update_latency_s)
+        #: Updates on the worker done at their deadline or late (a diagnostic).
+        self.deadline_waits = DeadlineWaits()
         self._warnings = RateLimitedWarning(log)
         self._state = self.DeclareAbstractState(AbstractValue.Make(CpfState()))
         self._frame_port = self.DeclareAbstractInputPort(
@@ -203,7 +206,8 @@ class CpfImageUpdateSystem(LeafSystem):
         """Applies a finished update (waiting for it if it is still running); True when
         it produced a new observation message."""
         try:
-            outcome = outcome.result()
+            outcome = (self.deadline_waits.join(outcome) if self._latency_s > 0
+                       else outcome.result())
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(frame, f"{type(err).__name__}: {err}")
         t = prior.image_time_s

@@ -19,8 +19,10 @@ from __future__ import annotations
 import atexit
 import os
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from typing import Any
 
 import numba
@@ -56,3 +58,28 @@ os.register_at_fork(after_in_child=_forget_in_child)
 def submit_image_update(function: Callable[..., Any], *args: Any) -> Future:
     """Runs ``function(*args)`` on the image-update thread; its Future."""
     return _worker().submit(function, *args)
+
+
+@dataclass
+class DeadlineWaits:
+    """Whether each update on the worker was done at its deadline, and how long the
+    Simulator waited for the late ones (wall-clock s). A machine keeps up with the
+    tracker at real time only if updates are rarely late. A diagnostic of the system,
+    over all its Contexts since it was built: it is not in any Context, and it changes
+    no estimate."""
+
+    on_time: int = 0
+    late: int = 0
+    waited_s: float = 0.0
+
+    def join(self, outcome: Future) -> Any:
+        """``outcome.result()`` (raising what the update raised), counted."""
+        if outcome.done():
+            self.on_time += 1
+            return outcome.result()
+        start = time.perf_counter()
+        try:
+            return outcome.result()
+        finally:
+            self.late += 1
+            self.waited_s += time.perf_counter() - start
