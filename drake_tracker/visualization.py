@@ -154,9 +154,9 @@ class FramePoseInWorld(LeafSystem):
         super().__init__()
         self._plant, self._frame = plant, frame
         self._plant_context = plant.CreateDefaultContext()
-        self.DeclareVectorInputPort("positions", plant.num_positions())
+        positions = self.DeclareVectorInputPort("positions", plant.num_positions())
         self.DeclareAbstractOutputPort("X_WF", lambda: AbstractValue.Make(RigidTransform()),
-                                       self._calc)
+                                       self._calc, {positions.ticket()})
 
     def _calc(self, context, output) -> None:
         self._plant.SetPositions(self._plant_context, self.get_input_port().Eval(context))

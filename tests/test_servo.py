@@ -118,3 +118,38 @@ def test_cli_rejects_an_unknown_run(capsys):
 
     assert main(["servo", "--runs", "encoders,magic", "--no-meshcat"]) == 2
     assert "magic" in capsys.readouterr().err
+
+
+def test_the_joint_servo_reference_is_computed_again_only_when_its_inputs_change(
+        monkeypatch):
+    """The plant reads the desired state at every step, after each of the other
+    systems' updates: it depends on its two inputs only, not on time or any state."""
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from drake_tracker.robot import add_robot, build_tracker_model, robot_preset
+    from drake_tracker.servo.world import JointServoReference
+
+    config = robot_preset("apollo")
+    plant = MultibodyPlant(time_step=0.0)
+    add_robot(plant, config)
+    plant.Finalize()
+    robot = build_tracker_model(config).robot_joint_names
+    arm = robot[-2:]
+    calls = []
+    calc = JointServoReference._calc
+    monkeypatch.setattr(JointServoReference, "_calc", lambda self, context, output: (
+        calls.append(1), calc(self, context, output)))
+    reference = JointServoReference(plant, robot, arm, np.zeros(plant.num_positions()))
+    context = reference.CreateDefaultContext()
+    command = np.array([1.0, 0.1, 0.2, 0.3, 0.4])
+    reference.GetInputPort("arm_command").FixValue(context, command)
+    reference.GetInputPort("encoder_bias").FixValue(context, np.full(len(robot), 0.01))
+    port = reference.GetOutputPort("desired_state")
+    first = port.Eval(context).copy()
+    context.SetTime(1.0)
+    np.testing.assert_array_equal(port.Eval(context), first)
+    assert len(calls) == 1
+    reference.GetInputPort("arm_command").FixValue(context, command + 0.5)
+    assert port.Eval(context)[plant.GetJointByName(arm[0]).position_start()] == \
+        pytest.approx(0.6 - 0.01)
+    assert len(calls) == 2

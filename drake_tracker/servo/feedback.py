@@ -57,9 +57,9 @@ class EncoderKinematicsPose(LeafSystem):
                                for n in robot_joint_names])
         self._C = self._plant.GetFrameByName(robot_config.camera_frame)
         self._E = self._plant.GetFrameByName(robot_config.end_effector_frame)
-        self.DeclareVectorInputPort("measured_position", len(robot_joint_names))
+        readings = self.DeclareVectorInputPort("measured_position", len(robot_joint_names))
         self.DeclareAbstractOutputPort("X_CE", lambda: AbstractValue.Make(RigidTransform()),
-                                       self._calc)
+                                       self._calc, {readings.ticket()})
 
     def _calc(self, context, output) -> None:
         q = self._plant.GetPositions(self._context)
@@ -83,10 +83,11 @@ class HealthToUsable(LeafSystem):
 
     def __init__(self):
         super().__init__()
-        self.DeclareAbstractInputPort("health", AbstractValue.Make(TrackerHealth()))
+        health = self.DeclareAbstractInputPort("health", AbstractValue.Make(TrackerHealth()))
         self.DeclareVectorOutputPort(
             "usable", 1, lambda c, o: o.SetAtIndex(
-                0, float(self.get_input_port(0).Eval(c).state != HealthState.LOST)))
+                0, float(self.get_input_port(0).Eval(c).state != HealthState.LOST)),
+            {health.ticket()})
 
 
 @dataclass

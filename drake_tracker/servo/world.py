@@ -104,10 +104,12 @@ class JointServoReference(LeafSystem):
         self._nq = plant.num_positions()
         m = len(arm_joints)
         self._m = m
-        self.DeclareVectorInputPort("arm_command", 1 + 2 * m)
-        self.DeclareVectorInputPort("encoder_bias", len(robot_joint_names))
+        command = self.DeclareVectorInputPort("arm_command", 1 + 2 * m)
+        bias = self.DeclareVectorInputPort("encoder_bias", len(robot_joint_names))
+        # Computed again only when an input changes: the plant reads it at every step,
+        # after each of the other systems' updates.
         self.DeclareVectorOutputPort("desired_state", self._nq + plant.num_velocities(),
-                                     self._calc)
+                                     self._calc, {command.ticket(), bias.ticket()})
 
     def _calc(self, context, output: BasicVector) -> None:
         command = self.GetInputPort("arm_command").Eval(context)

@@ -145,7 +145,8 @@ class OccluderPoses(LeafSystem):
         self._positions = self.DeclareVectorInputPort("positions", num_positions)
         self.DeclareAbstractOutputPort("geometry_pose",
                                        lambda: AbstractValue.Make(FramePoseVector()),
-                                       self._calc)
+                                       self._calc,
+                                       {self.time_ticket(), self._positions.ticket()})
 
     def _calc(self, context, output):
         poses = self._motion.poses(context.get_time(), self._positions.Eval(context))

@@ -121,7 +121,8 @@ class InverseDynamicsTracking(LeafSystem):
         nq, nv = plant.num_positions(), plant.num_velocities()
         self._nq = nq
         self._state = self.DeclareVectorInputPort("state", nq + nv)
-        self.DeclareVectorOutputPort("generalized_force", nv, self._calc)
+        self.DeclareVectorOutputPort("generalized_force", nv, self._calc,
+                                     {self.time_ticket(), self._state.ticket()})
 
     def _calc(self, context, output: BasicVector):
         t, h = context.get_time(), 1e-4

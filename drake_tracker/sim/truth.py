@@ -44,12 +44,15 @@ class TruthSystem(LeafSystem):
         self._camera_frame = camera_frame
         self._ee_frame = end_effector_frame
         self._positions = self.DeclareVectorInputPort("positions", plant.num_positions())
+        positions = {self._positions.ticket()}  # what every output depends on
         self.DeclareVectorOutputPort("true_position", len(self._robot_idx),
-                                     lambda c, o: o.SetFromVector(self._q(c)[self._robot_idx]))
+                                     lambda c, o: o.SetFromVector(self._q(c)[self._robot_idx]),
+                                     positions)
         self.DeclareVectorOutputPort(
-            "true_camera_offset", 6, lambda c, o: o.SetFromVector(self._q(c)[self._virtual_idx]))
+            "true_camera_offset", 6, lambda c, o: o.SetFromVector(self._q(c)[self._virtual_idx]),
+            positions)
         self.DeclareAbstractOutputPort("true_X_CE", lambda: AbstractValue.Make(RigidTransform()),
-                                       self._calc_X_CE)
+                                       self._calc_X_CE, positions)
 
     def _q(self, context) -> np.ndarray:
         return self._positions.Eval(context)

@@ -38,7 +38,7 @@ class DepthFrameToPointCloud(LeafSystem):
             "depth_frame", AbstractValue.Make(DepthFrame.empty()))
         self.DeclareAbstractOutputPort("point_cloud",
                                        lambda: AbstractValue.Make(PointCloud(0)),
-                                       self._calc)
+                                       self._calc, {self._frame_port.ticket()})
 
     def _calc(self, context, output):
         frame: DepthFrame = self._frame_port.Eval(context)
