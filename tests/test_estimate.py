@@ -38,3 +38,22 @@ def test_non_finite_positions_are_refused_on_either_path(apollo):
     for bad in (q, np.array([q, q])):
         with pytest.raises(ValueError, match="NaN or infinite"):
             readout.poses(bad)
+
+
+def test_the_readout_loads_its_kernel_when_made_and_a_context_adds_no_signature(apollo):
+    """A Diagram's first hand pose must not stall the Simulator on numba's cache: the
+    kernel is loaded when the readout is made, and a Context's read-only state reaches
+    it with the same signature as an array of one's own."""
+    from drake_tracker.core.kinematics import relative_poses_one
+    from drake_tracker.params import TrackerParams
+    from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
+
+    bank = JointKalmanBankSystem(apollo, TrackerParams(), period_s=1e-3)
+    signatures = list(relative_poses_one.signatures)
+    assert signatures  # loaded by the readout
+    context = bank.CreateDefaultContext()
+    assert not bank.belief(context).flags.writeable  # what the outputs read
+    X_CE = bank.GetOutputPort("X_CE").Eval(context).GetAsMatrix4()
+    assert list(relative_poses_one.signatures) == signatures
+    np.testing.assert_array_equal(X_CE, PoseReadout(apollo).poses(
+        np.zeros(apollo.num_joints))[0][0])

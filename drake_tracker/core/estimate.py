@@ -48,7 +48,9 @@ class PoseReadout:
     One configuration (the estimate at each output, 1000 a simulated second in a
     Diagram) goes through the serial kernel ``relative_poses_one`` in the world frame,
     the same body poses as ``BatchedKinematics.body_poses`` without its parallel launch
-    (which costs 100x the work); the rest of the arithmetic is the same either way."""
+    (which costs 100x the work); the rest of the arithmetic is the same either way.
+    The kernel is loaded when the readout is made: its first call reads numba's cache
+    (0.3 s here), which would otherwise stall a Diagram at its first output."""
 
     def __init__(self, model: TrackerModel):
         self.model = model
@@ -58,6 +60,7 @@ class PoseReadout:
         for key, frame in (("C", model.camera_frame), ("E", model.end_effector_frame)):
             X_BF = np.asarray(frame.GetFixedPoseInBodyFrame().GetAsMatrix4(), float)
             self._frames[key] = (int(frame.body().index()), X_BF)
+        self.body_poses(np.zeros(self.kinematics.num_positions))  # load the kernel now
 
     def body_poses(self, q: np.ndarray) -> np.ndarray:
         """World poses X_WB of all bodies, (N, num_bodies, 4, 4): those of
@@ -65,6 +68,8 @@ class PoseReadout:
         q = self.kinematics.checked_positions(q)
         if q.shape[0] != 1:
             return self.kinematics.body_poses(q)
+        if not q.flags.writeable:  # a Context's read-only state: one kernel signature
+            q = q.copy()
         nb = self.kinematics.num_bodies
         X_WB = np.empty((1, nb, 4, 4))
         relative_poses_one(0, q, *self._world_tables, np.empty((nb, 4, 4)), X_WB[0],
