@@ -171,6 +171,7 @@ def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
         frame_the_robot(meshcat, world.plant, world.end_effector_frame.model_instance(),
                         world.reference.positions(0.0))
         meshcat.StartRecording(frames_per_second=30.0)
+        hook.image_update = tracker.image_update  # its deadline_waits, for the report
         return {"full_fusion_X_CE": tracker.port("X_CE")}
 
     return hook
@@ -271,10 +272,11 @@ def run_demo(args: argparse.Namespace, scenario: Scenario | None = None,
           "  truth: the robot's own colours; encoders only: translucent blue; estimate: "
           "translucent green", flush=True)
     simulated = render_what_the_tracker_reads(scenario, params)
+    hook = demo_hook(meshcat, params)
     run = simulate_and_record(simulated, duration_s=getattr(args, "duration", None),
                               image_stride=simulated.camera.render_stride,
-                              add_systems=demo_hook(meshcat, params), validate=False,
-                              progress=progress)
+                              add_systems=hook, validate=False, progress=progress)
+    waits = hook.image_update.deadline_waits
     meshcat.StopRecording()
     meshcat.PublishRecording()
     (out / "meshcat.html").write_text(add_legend(meshcat.StaticHtml(), legend_entries()))
@@ -292,6 +294,10 @@ def run_demo(args: argparse.Namespace, scenario: Scenario | None = None,
         "num_truth_samples": len(run.truth_times_s),
         "simulation_wall_time_s": run.extra["wall_time_s"],
         "real_time_factor": run.duration_s / run.extra["wall_time_s"],
+        # Image updates the Simulator had to wait for at their deadline, and how long.
+        "image_updates_late": waits.late,
+        "image_updates_on_time": waits.on_time,
+        "image_update_wait_s": waits.waited_s,
         "wall_time_s": time.perf_counter() - start,
     })
     png = write_diagram(run.extra["graphviz"], out)
@@ -300,7 +306,9 @@ def run_demo(args: argparse.Namespace, scenario: Scenario | None = None,
           "first reading on")
     print(format_report_table(report))
     print(f"real-time factor {report['real_time_factor']:.2f} (simulation "
-          f"{report['simulation_wall_time_s']:.1f} s); wall time {report['wall_time_s']:.1f} s")
+          f"{report['simulation_wall_time_s']:.1f} s); wall time {report['wall_time_s']:.1f} s; "
+          f"{waits.late} of {waits.late + waits.on_time} image updates late at their "
+          f"deadline ({waits.waited_s:.1f} s waited)")
     written = ["report.json", "errors.png", "meshcat.html (open it in a browser)",
                "diagram.dot"] + (["diagram.png"] if png else [])
     print(f"wrote to {out}/: {', '.join(written)}")

@@ -63,6 +63,12 @@ def test_demo_writes_report_with_both_methods(demo_run):
             assert set(summary) == {"p1", "p25", "p50", "p75", "p99"}
             assert all(v == v for v in summary.values())  # no NaN
     assert report["real_time_factor"] > 0
+    # Every update ran on the worker (image.update_latency_s 0.08 by default), and was
+    # either done at its deadline or waited for.
+    assert report["image_updates_late"] + report["image_updates_on_time"] >= 1
+    assert report["image_update_wait_s"] >= 0
+    assert (report["image_update_wait_s"] > 0) == (report["image_updates_late"] > 0)
+    assert "late at their deadline" in stdout
     assert (out / "errors.png").stat().st_size > 0
     assert "tracker_kalman_bank" in (out / "diagram.dot").read_text()
     assert "meshcat.html" in stdout and "ends with the run" in stdout
