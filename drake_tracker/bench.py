@@ -61,6 +61,8 @@ from drake_tracker.robot import TrackerModel, build_tracker_model, robot_preset
 if TYPE_CHECKING:
     import argparse
 
+    from pydrake.systems.framework import DiagramBuilder
+
 #: The ``image.sweep_image_widths_px`` the bench times beside the defaults.
 COARSE_SWEEP_WIDTHS_PX = [40, 40, 40, 80]
 
@@ -111,10 +113,18 @@ def bench_kalman(model: TrackerModel, params: TrackerParams, repeats: int = 2000
             "bank_variance_check": float(buffer.present()[1][VAR_A].max())}
 
 
-def bench_demo(params: TrackerParams, duration_s: float) -> dict:
-    """The demo's real-time factor on its first ``duration_s`` (see the module doc)."""
+def add_second_marks(builder: DiagramBuilder, marks: list) -> None:
+    """Adds ``bench_clock``, which appends (simulated s, wall s, the Simulator thread's
+    CPU s, the process's CPU s) to ``marks`` at every simulated second."""
     from pydrake.systems.framework import LeafSystem
 
+    clock = builder.AddNamedSystem("bench_clock", LeafSystem())
+    clock.DeclarePeriodicPublishEvent(1.0, 0.0, lambda context: marks.append(
+        (context.get_time(), time.perf_counter(), time.thread_time(), time.process_time())))
+
+
+def bench_demo(params: TrackerParams, duration_s: float) -> dict:
+    """The demo's real-time factor on its first ``duration_s`` (see the module doc)."""
     from drake_tracker.demo import (
         DEFAULT_SCENARIO,
         demo_hook,
@@ -126,33 +136,30 @@ def bench_demo(params: TrackerParams, duration_s: float) -> dict:
 
     scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
     hook = demo_hook(start_meshcat(), params)
-    marks = []  # (simulated s, wall s, CPU s) at every simulated second
+    marks = []  # filled by add_second_marks
 
     def add_systems(builder, world):
-        clock = LeafSystem()
-        clock.DeclarePeriodicPublishEvent(1.0, 0.0, lambda context: marks.append(
-            (context.get_time(), time.perf_counter(), time.process_time())))
-        builder.AddNamedSystem("bench_clock", clock)
+        add_second_marks(builder, marks)
         return hook(builder, world)
 
     run = simulate_and_record(scenario, duration_s=duration_s,
                               image_stride=scenario.camera.render_stride,
                               add_systems=add_systems, validate=False)
     wall_end, cpu_end = time.perf_counter(), time.process_time()
-    after = [(t, wall) for t, wall, _ in marks if t == 1.0]
+    after = [(t, wall) for t, wall, *_ in marks if t == 1.0]
     return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s,
             "render_stride": scenario.camera.render_stride,
             # the same figure as the demo's report.json
             "real_time_factor": run.duration_s / run.extra["wall_time_s"],
             "real_time_factor_after_1s": ((run.duration_s - 1.0) / (wall_end - after[0][1])
                                           if after and run.duration_s > 1.5 else None),
-            "real_time_factor_cpu": run.duration_s / (cpu_end - marks[0][2])}
+            "real_time_factor_cpu": run.duration_s / (cpu_end - marks[0][3])}
 
 
 def bench_tracker_alone(params: TrackerParams, duration_s: float) -> dict:
     """The tracker's Diagram alone on the demo's recorded sensors (see the module doc)."""
     from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder, LeafSystem
+    from pydrake.systems.framework import DiagramBuilder
 
     from drake_tracker.demo import DEFAULT_SCENARIO, render_what_the_tracker_reads
     from drake_tracker.sim.record import simulate_and_record
@@ -170,11 +177,9 @@ def bench_tracker_alone(params: TrackerParams, duration_s: float) -> dict:
                          source.GetOutputPort("measured_position"),
                          source.GetOutputPort("measurement_time"),
                          source.GetOutputPort("depth_frame"),
-                         encoder_period_s=float(np.median(np.diff(run.reading_times_s))))
-    marks = []  # (simulated s, wall s, this thread's CPU s, the process's CPU s)
-    clock = builder.AddNamedSystem("bench_clock", LeafSystem())
-    clock.DeclarePeriodicPublishEvent(1.0, 0.0, lambda context: marks.append(
-        (context.get_time(), time.perf_counter(), time.thread_time(), time.process_time())))
+                         encoder_period_s=1.0 / scenario.encoders.rate_hz)
+    marks = []  # filled by add_second_marks
+    add_second_marks(builder, marks)
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(run.duration_s)
     end = (time.perf_counter(), time.thread_time(), time.process_time())
