@@ -23,7 +23,7 @@ import numpy as np
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.pipeline import full_reading
-from drake_tracker.core.timestamps import RateLimitedWarning
+from drake_tracker.core.rate_limited_warning import RateLimitedWarning
 from drake_tracker.metrics import format_report_table, method_report
 from drake_tracker.params import TrackerParams, load_tracker_params
 from drake_tracker.progress import count_bar

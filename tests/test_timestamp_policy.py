@@ -8,7 +8,8 @@ import logging
 import numpy as np
 import pytest
 
-from drake_tracker.core.timestamps import RateLimitedWarning, StreamClock
+from drake_tracker.core.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.timestamps import StreamClock
 from drake_tracker.params import TimestampParams, TrackerParams, validate_tracker_params
 
 
@@ -43,6 +44,53 @@ def test_a_glitched_first_stamp_is_outvoted_by_the_stream():
     decisions = [clock.check(t) for t in [1e6, 0.005, 0.010, 0.015, 0.020, 0.025]]
     assert [d.time_s for d in decisions] == [1e6, None, None, None, 0.020, 0.025]
     assert decisions[4].restarted and not decisions[5].restarted
+
+
+class _FullCheckClock(StreamClock):
+    """A StreamClock that takes every finite stamp after the first through the full
+    policy (no fast path for the usual sample)."""
+
+    def check(self, raw_s):
+        raw = float(raw_s)
+        if self.latest_s is None or not np.isfinite(raw):
+            return super().check(raw)
+        return self._checked(raw)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("max_behind_s", [0.0, 1.0])
+def test_the_usual_sample_fast_path_decides_as_the_full_policy(seed, max_behind_s):
+    # A 1 kHz stream with every awkwardness: jitter, repeats, small steps back, glitches
+    # far in the future, steps that stay (forward by more and less than
+    # min_future_jump_s, and back), NaN and inf, and a tight min_future_jump_s so that
+    # the future limit is the recent period's, not the floor's.
+    rng = np.random.default_rng(seed)
+    params = TimestampParams(reanchor_after_samples=4, min_future_jump_s=0.02,
+                             max_future_jump_periods=10.0)
+    raw, t, offset = [], 0.0, 0.0
+    for _ in range(6000):
+        t += 1e-3 + rng.normal(0.0, 1e-4)
+        event = rng.random()
+        if event < 0.003:
+            offset += rng.choice([-2.0, -0.05, 0.015, 0.05, 40.0])  # a step that stays
+        stamp = t + offset
+        if event > 0.995:
+            stamp += rng.choice([1000.0, 0.03, -0.002, np.nan, np.inf])  # one glitch
+        elif event > 0.99:
+            stamp = raw[-1] if raw else stamp  # a repeated stamp
+        raw.append(stamp)
+    fast = StreamClock("joint reading", params, max_behind_s)
+    full = _FullCheckClock("joint reading", params, max_behind_s)
+    decisions = [(fast.check(r), full.check(r)) for r in raw]
+    assert all(a == b for a, b in decisions)
+    assert fast.__dict__.keys() == full.__dict__.keys()
+    for key, value in fast.__dict__.items():
+        assert value == full.__dict__[key] or key == "params", key
+    # The stream did go through every branch.
+    kinds = {a.kind for a, _ in decisions}
+    assert {"", "stamps far in the future", "stamps behind the latest",
+            "non-finite stamps"} <= kinds
+    assert sum(a.reanchored_by_s is not None for a, _ in decisions) >= 3
 
 
 def test_images_may_come_out_of_order_within_the_window():

@@ -20,10 +20,10 @@ stamp. The tracker keeps its belief and its buffer; the samples of the run befor
 re-anchoring one are lost. (Taking every re-anchored clock to continue where it was keeps
 a camera whose clock did not step aligned with encoders whose clock did.)
 
-:class:`RateLimitedWarning` logs each kind of problem at its 1st, 10th, 100th, ...
-occurrence, with the count; :class:`ReadingGate` adds the joint values' check: a run of
-non-finite readings (an encoder gap) gets one warning when it starts and one info line
-when it ends.
+:class:`RateLimitedWarning` (``core/rate_limited_warning.py``) logs each kind of problem
+at its 1st, 10th, 100th, ... occurrence, with the count; :class:`ReadingGate` adds the
+joint values' check: a run of non-finite readings (an encoder gap) gets one warning when
+it starts and one info line when it ends.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.core.rate_limited_warning import RateLimitedWarning
 from drake_tracker.params import TimestampParams
 
 if TYPE_CHECKING:
@@ -47,39 +48,6 @@ _log = logging.getLogger(__name__)
 
 #: Accepted gaps kept to estimate a stream's recent sample period (their median).
 RECENT_GAPS = 16
-
-
-class RateLimitedWarning:
-    """Logs the 1st, 10th, 100th, ... warning of each ``kind``, with the count so far."""
-
-    def __init__(self, logger: logging.Logger, enabled: bool = True):
-        self.logger = logger
-        self.enabled = enabled
-        self.counts: dict[str, int] = {}
-
-    def copy(self) -> RateLimitedWarning:
-        """An independent copy that shares the logger."""
-        clone = RateLimitedWarning(self.logger, self.enabled)
-        clone.counts = dict(self.counts)
-        return clone
-
-    def __deepcopy__(self, memo) -> RateLimitedWarning:
-        return self.copy()
-
-    def warn(self, kind: str, message: str) -> None:
-        """Counts one warning of ``kind`` and logs ``message`` at the 1st, 10th, 100th, ... of
-        that kind (with the count so far after the first); only counts when not ``enabled``."""
-        count = self.counts.get(kind, 0) + 1
-        self.counts[kind] = count
-        if self.enabled and _is_power_of_ten(count):
-            suffix = "" if count == 1 else f" ({count} {kind} so far; logged at 1, 10, 100, ...)"
-            self.logger.warning("%s%s", message, suffix)
-
-
-def _is_power_of_ten(count: int) -> bool:
-    while count % 10 == 0:
-        count //= 10
-    return count == 1
 
 
 def median(values: Iterable[float]) -> float:
@@ -182,6 +150,15 @@ class StreamClock:
             return StampDecision(None, f"its time stamp {raw} is not finite", "non-finite stamps")
         if self.latest_s is None:
             return self._accept(raw)
+        if 0 < raw + self.offset_s - self.latest_s <= self.params.min_future_jump_s:
+            # The usual sample: after the latest, and within the least future limit
+            # (``future_limit_s`` is never below it), so ``_checked`` would accept it;
+            # this spares the median of the recent gaps at every sample.
+            return self._accept(raw)
+        return self._checked(raw)
+
+    def _checked(self, raw: float) -> StampDecision:
+        """:meth:`check`'s decision for a finite stamp after the first, in full."""
         t = raw + self.offset_s
         gap = t - self.latest_s
         if gap > self.future_limit_s():

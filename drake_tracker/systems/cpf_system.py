@@ -14,7 +14,8 @@ from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.core.health import TrackerHealth, next_health
 from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
-from drake_tracker.core.timestamps import RateLimitedWarning, problem_kind
+from drake_tracker.core.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.timestamps import problem_kind
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.image_update_worker import DeadlineWaits, submit_image_update
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
