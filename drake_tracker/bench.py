@@ -36,7 +36,9 @@ Keys of ``bench.json``:
   per simulated second in the Simulator's thread and in the other threads (the image
   update's worker), images applied per second, the median wall time of an update, and
   how many updates were not done at their deadline (``CpfImageUpdateSystem.
-  deadline_waits``) with the Simulator's wait per simulated second.
+  deadline_waits``) with the Simulator's wait per simulated second;
+* ``reading_path``: what each joint reading costs the Simulator's thread in a Diagram,
+  on the same recorded sensors (:mod:`drake_tracker.bench_readings`).
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.bench_readings import bench_reading_path, format_reading_path
 from drake_tracker.core.angle_observation import AngleObservation
 from drake_tracker.core.belief_buffer import BeliefBuffer
 from drake_tracker.core.camera import CameraIntrinsics
@@ -62,6 +65,9 @@ if TYPE_CHECKING:
     import argparse
 
     from pydrake.systems.framework import DiagramBuilder
+
+    from drake_tracker.recording import RecordedRun
+    from drake_tracker.sim.scenario import Scenario
 
 #: The ``image.sweep_image_widths_px`` the bench times beside the defaults.
 COARSE_SWEEP_WIDTHS_PX = [40, 40, 40, 80]
@@ -156,20 +162,32 @@ def bench_demo(params: TrackerParams, duration_s: float) -> dict:
             "real_time_factor_cpu": run.duration_s / (cpu_end - marks[0][3])}
 
 
-def bench_tracker_alone(params: TrackerParams, duration_s: float) -> dict:
-    """The tracker's Diagram alone on the demo's recorded sensors (see the module doc)."""
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-
+def record_demo_sensors(params: TrackerParams, duration_s: float) -> tuple[Scenario,
+                                                                         RecordedRun]:
+    """The demo's scenario (camera rendering what the tracker reads) and its sensors
+    recorded over the first ``duration_s``, for the benches that replay them."""
     from drake_tracker.demo import DEFAULT_SCENARIO, render_what_the_tracker_reads
     from drake_tracker.sim.record import simulate_and_record
     from drake_tracker.sim.scenario import load_scenario
+
+    scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
+    return scenario, simulate_and_record(scenario, duration_s=duration_s,
+                                         image_stride=scenario.camera.render_stride,
+                                         validate=False)
+
+
+def bench_tracker_alone(params: TrackerParams, duration_s: float,
+                        recording: tuple[Scenario, RecordedRun] | None = None) -> dict:
+    """The tracker's Diagram alone on the demo's recorded sensors (see the module doc);
+    ``recording``: :func:`record_demo_sensors`'s, else made here."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+
+    from drake_tracker.demo import DEFAULT_SCENARIO
     from drake_tracker.systems.add_tracker import AddTracker
     from drake_tracker.systems.recorded_run_source import RecordedRunSource
 
-    scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
-    run = simulate_and_record(scenario, duration_s=duration_s,
-                              image_stride=scenario.camera.render_stride, validate=False)
+    scenario, run = recording or record_demo_sensors(params, duration_s)
     model = build_tracker_model(scenario.resolved_robot_config())
     builder = DiagramBuilder()
     source = builder.AddSystem(RecordedRunSource(run))
@@ -222,7 +240,12 @@ def run_benchmarks(quick: bool = False) -> dict:
                                 repeats)
     kalman = bench_kalman(apollo, params)
     demo = bench_demo(params, 2.0 if quick else 4.0)
-    alone = bench_tracker_alone(params, 3.0 if quick else 6.0)
+    recording = record_demo_sensors(params, 3.0 if quick else 6.0)
+    alone = bench_tracker_alone(params, recording[1].duration_s, recording)
+    readings = bench_reading_path(recording[1],
+                                  build_tracker_model(recording[0].resolved_robot_config()),
+                                  params, 1.0 / recording[0].encoders.rate_hz,
+                                  2 if quick else 3)
     bench, cad = results["apollo"], results["apollo_cad"]
     size = camera.subsampled(bench_stride(camera, params))
     return {
@@ -244,6 +267,7 @@ def run_benchmarks(quick: bool = False) -> dict:
         "replay_us_per_reading": kalman["replay_us_per_reading"],
         "demo": demo,
         "tracker_alone": alone,
+        "reading_path": readings,
     }
 
 
@@ -309,6 +333,7 @@ def format_bench(result: dict) -> str:
     ]
     lines.append(format_demo(result["demo"]))
     lines.append(format_tracker_alone(result["tracker_alone"]))
+    lines.append(format_reading_path(result["reading_path"]))
     return "\n".join(lines)
 
 

@@ -3,9 +3,19 @@ assertions: the figures themselves go in the README)."""
 
 import math
 
-from drake_tracker.bench import bench_demo, bench_tracker_alone, format_demo, format_tracker_alone
+import pytest
+
+from drake_tracker.bench import (
+    bench_demo,
+    bench_tracker_alone,
+    format_demo,
+    format_tracker_alone,
+    record_demo_sensors,
+)
+from drake_tracker.bench_readings import bench_reading_path, format_reading_path
 from drake_tracker.core.camera import stride_for_width
 from drake_tracker.params import TrackerParams
+from drake_tracker.robot import build_tracker_model
 
 
 def test_bench_demo_reports_its_real_time_factors():
@@ -37,3 +47,23 @@ def test_bench_tracker_alone_reports_the_tracker_on_recorded_sensors():
     assert result["deadline_wait_s_per_s"] >= 0
     text = format_tracker_alone(result)
     assert "tracker alone" in text and "images applied per s" in text
+
+
+def test_bench_reading_path_reports_what_each_joint_reading_costs():
+    params = TrackerParams()
+    scenario, run = record_demo_sensors(params, 1.2)
+    model = build_tracker_model(scenario.resolved_robot_config())
+    period_s = 1.0 / scenario.encoders.rate_hz
+    result = bench_reading_path(run, model, params, period_s, repeats=1)
+    for key in ("us_per_reading", "bank_us_per_reading", "buffer_us_per_reading",
+                "source_us_per_reading"):
+        assert math.isfinite(result[key]) and result[key] > 0, key
+    assert result["duration_s"] == 1.2 and result["repeats"] == 1
+    # The timed Diagram did filter the readings, up to the last one before the end
+    # (AdvanceTo(t) leaves the updates at t pending).
+    before_end = run.reading_times_s[run.reading_times_s < run.duration_s]
+    assert result["last_reading_filtered_s"] == before_end[-1]
+    assert "each joint reading in a Diagram" in format_reading_path(result)
+    short = record_demo_sensors(params, 0.8)[1]
+    with pytest.raises(ValueError, match="longer than"):
+        bench_reading_path(short, model, params, period_s)
