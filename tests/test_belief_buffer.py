@@ -189,8 +189,8 @@ def test_image_anchor_interpolates_the_readings_and_falls_back_across_a_gap():
 
 
 def test_a_copied_buffer_goes_on_alone_and_steps_as_the_bank_does():
-    """``copy()`` (the delay buffer system's copy per reading) shares the stored arrays
-    but not the lists: each copy goes on on its own; a reading is the bank's checked step."""
+    """``copy()`` (the delay buffer system's copy per reading) shares the stored events:
+    each copy goes on on its own; a reading is the bank's checked step."""
     bank = _bank()
     start = initial_moments(np.zeros(N), np.full(N, 0.1), np.full(N, 0.05),
                             np.array([True, True, True, False]))
@@ -204,3 +204,53 @@ def test_a_copied_buffer_goes_on_alone_and_steps_as_the_bank_does():
                                                         reading))
         assert (len(buf), buf.now_s) == before and copy.now_s == 0.01 * k
         buf, expected = copy, belief
+
+
+def _state(buf):
+    """What a buffer holds, as plain values: its present, its anchor and every stored
+    belief at its event times."""
+    times = [e.time_s for e in buf._log.events[buf._start:buf._end]]
+    return (buf.now_s, buf.oldest_time_s, buf.present()[1].tolist(), times,
+            [buf.belief_at(t).tolist() for t in times])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_copies_that_share_their_log_go_on_as_buffers_fed_alone(seed):
+    """Copies share one log (appends in place, copy on any other change, compaction of
+    the pruned events): whatever the order in which copies are made, fed readings and
+    images, each holds exactly what a buffer fed its own events alone holds."""
+    rng = np.random.default_rng(seed)
+    bank = _bank()
+    start = initial_moments(np.zeros(N), np.full(N, 0.1), np.full(N, 0.05),
+                            np.array([True, True, True, False]))
+    times = np.cumsum(rng.uniform(0.0008, 0.0012, 3000))  # 3 s: compacts at 1024 events
+    readings = rng.normal(0.3, 0.05, (3000, N))
+    # Three lineages from one buffer, each with its own images; the fed-alone reference
+    # of each replays its history from scratch.
+    lineages = [BeliefBuffer(bank, start, 0.0, horizon_s=0.5)]
+    histories = [[]]
+    for k, (t, q) in enumerate(zip(times, readings)):
+        if k in (700, 1500):  # a new lineage branches off from a random one
+            j = int(rng.integers(len(lineages)))
+            lineages.append(lineages[j].copy())
+            histories.append(list(histories[j]))
+        for j, buf in enumerate(lineages):
+            copy = buf.copy()  # as the delay buffer system does at every reading
+            if rng.random() < 0.02 and k > 50:  # an image, somewhere in the last 0.05 s
+                t_image = t - rng.uniform(0.0, 0.05)
+                y = rng.normal(0.25, 0.02, N)
+                copy.add_image(t_image, _linear_image_update(y, 1e-4))
+                histories[j].append(("image", t_image, y))
+            copy.add_reading(t, q)
+            histories[j].append(("reading", t, q))
+            lineages[j] = copy
+        if k % 250 == 249 or k == 2999:
+            for buf, history in zip(lineages, histories):
+                alone = BeliefBuffer(bank, start, 0.0, horizon_s=0.5)
+                for kind, t_event, value in history:
+                    if kind == "reading":
+                        alone.add_reading(t_event, value)
+                    else:
+                        alone.add_image(t_event, _linear_image_update(value, 1e-4))
+                assert _state(buf) == _state(alone)
+    assert len(lineages) == 3 and all(buf._start < 1024 for buf in lineages)

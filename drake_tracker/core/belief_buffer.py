@@ -46,6 +46,23 @@ class _Event:
     observation: AngleObservation | None = None
 
 
+#: A buffer's log is compacted (its live events copied to a new one) once this many
+#: pruned events, and at least as many as are live, sit before them.
+COMPACT_AFTER = 1024
+
+
+class _Log:
+    """Events, their times and the belief after each, in time order: the storage that
+    copies of a buffer share. Each buffer sees the slice [start, end) of it; one whose
+    end is the log's end appends in place (the others' slices do not change), and any
+    other change goes to a private log first (copy on write)."""
+
+    __slots__ = ("events", "beliefs", "times")
+
+    def __init__(self, events: list[_Event], beliefs: list[np.ndarray], times: list[float]):
+        self.events, self.beliefs, self.times = events, beliefs, times
+
+
 #: An image update: given the angles' prior (5, n) at the image time, their posterior
 #: marginals (mean, variance).
 ImageUpdate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -89,21 +106,23 @@ class BeliefBuffer:
         self.horizon_s = float(horizon_s)
         self._anchor_time = float(initial_time_s)
         self._anchor = initial_moments.copy()
-        self._events: list[_Event] = []
-        self._beliefs: list[np.ndarray] = []
-        self._times: list[float] = []
+        self._log = _Log([], [], [])
+        self._start = 0
+        self._end = 0
+        #: Whether no copy shares ``_log`` (then it may be changed in place).
+        self._private = True
         self._last_reading_time = -np.inf
         self._now = float(initial_time_s)
 
     def copy(self) -> BeliefBuffer:
-        """An independent copy that shares the stored arrays: the buffer never modifies an
-        array in place (every update stores a new one), so sharing them is safe and makes
-        a copy cost a few list copies, not a deep copy."""
+        """An independent copy that shares the stored events and arrays: the buffer never
+        modifies an array in place (every update stores a new one), and the two append
+        to their shared log in turn or copy it before any other change (``_Log``), so a
+        copy costs the same whatever the buffer holds (the delay buffer's LeafSystem
+        copies it at every reading, 1000 times a simulated second)."""
         clone = object.__new__(BeliefBuffer)
         clone.__dict__.update(self.__dict__)
-        clone._events = list(self._events)
-        clone._beliefs = list(self._beliefs)
-        clone._times = list(self._times)
+        self._private = clone._private = False
         return clone
 
     def __deepcopy__(self, memo) -> BeliefBuffer:
@@ -121,14 +140,16 @@ class BeliefBuffer:
         return self._anchor_time
 
     def __len__(self) -> int:
-        return len(self._events)
+        return self._end - self._start
 
     def _latest_at_or_before(self, t: float) -> tuple[int, float, np.ndarray]:
-        """(index of the first event after t, time and belief of the latest at or before t)."""
-        k = bisect.bisect_right(self._times, t)
-        if k == 0:
-            return 0, self._anchor_time, self._anchor
-        return k, self._times[k - 1], self._beliefs[k - 1]
+        """(log index of the first event after t, time and belief of the latest at or
+        before t)."""
+        log = self._log
+        k = bisect.bisect_right(log.times, t, self._start, self._end)
+        if k == self._start:
+            return k, self._anchor_time, self._anchor
+        return k, log.times[k - 1], log.beliefs[k - 1]
 
     def belief_at(self, t: float) -> np.ndarray:
         """The latest belief at or before ``t``, predicted to ``t``."""
@@ -158,14 +179,14 @@ class BeliefBuffer:
                 f"({self._last_reading_time} s)")
         reading = self.bank.check_reading(reading).copy()
         k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
-        self._insert(k, _Event(float(t), reading=reading),
-                     self.bank.step_unchecked(belief, float(t - t0), reading))
+        k = self._insert(k, _Event(float(t), reading=reading),
+                         self.bank.step_unchecked(belief, float(t - t0), reading))
         self._last_reading_time = float(t)
-        if k < len(self._events) - 1:
+        if k < self._end - 1:
             self._replay_from(k + 1)
         self._now = max(self._now, float(t))
         self._prune()
-        return self._beliefs[-1]
+        return self._log.beliefs[self._end - 1]
 
     def image_time_problem(self, t: float) -> str | None:
         """Why an image stamped ``t`` cannot be applied (too old, from the future, not
@@ -200,20 +221,23 @@ class BeliefBuffer:
         ``reading_gap_problem``)."""
         if self._last_reading_time == -np.inf or not np.isfinite(t):
             return None
-        k = bisect.bisect_right(self._times, t)
+        times = self._log.times
+        k = bisect.bisect_right(times, t, self._start, self._end)
         before, after = self._reading_around(k - 1, -1), self._reading_around(k, 1)
-        t0 = self._times[before] if before is not None else self._anchor_time
+        t0 = times[before] if before is not None else self._anchor_time
         if t0 == t:
             return None
-        t1 = self._times[after] if after is not None else self._now
+        t1 = times[after] if after is not None else self._now
         if t1 - t0 <= self.max_interpolation_gap_s:
             return None
         return t0, t1, after is not None
 
     def _reading_around(self, k: int, step: int) -> int | None:
-        """Index of the nearest reading event from index ``k`` on, walking by ``step``."""
-        while 0 <= k < len(self._events):
-            if self._events[k].reading is not None:
+        """Log index of the nearest reading event from log index ``k`` on, walking by
+        ``step``."""
+        events = self._log.events
+        while self._start <= k < self._end:
+            if events[k].reading is not None:
                 return k
             k += step
         return None
@@ -226,25 +250,26 @@ class BeliefBuffer:
         problem = self.image_time_problem(t)
         if problem is not None:
             raise ValueError(f"image cannot be placed: {problem}")
-        k = bisect.bisect_right(self._times, t)
+        times, events = self._log.times, self._log.events
+        k = bisect.bisect_right(times, t, self._start, self._end)
         before, after = self._reading_around(k - 1, -1), self._reading_around(k, 1)
-        if before is not None and self._times[before] == t:
+        if before is not None and times[before] == t:
             after = before
         usable = (before is not None and after is not None
-                  and self._times[after] - self._times[before] <= self.max_interpolation_gap_s)
+                  and times[after] - times[before] <= self.max_interpolation_gap_s)
         if not usable:
             zero = np.zeros(self.bank.num_joints)
             return ImageAnchor(float(t), float(t), self.belief_at(t), zero)
-        t0, t1 = self._times[before], self._times[after]
-        q0, q1 = self._events[before].reading, self._events[after].reading
+        t0, t1 = times[before], times[after]
+        q0, q1 = events[before].reading, events[after].reading
         fraction = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
         q_at_image = q0 + fraction * (q1 - q0)
         anchor = before if t - t0 <= t1 - t else after
-        shift = q_at_image - self._events[anchor].reading
+        shift = q_at_image - events[anchor].reading
         # The latest belief at the anchor's time (after any observation stored there).
-        prior = self.belief_at(self._times[anchor]).copy()
+        prior = self.belief_at(times[anchor]).copy()
         prior[MEAN_A] = prior[MEAN_A] + shift
-        return ImageAnchor(float(t), self._times[anchor], prior, shift)
+        return ImageAnchor(float(t), times[anchor], prior, shift)
 
     def add_image(self, t: float, update: ImageUpdate) -> bool:
         """Applies an image stamped ``t`` (see ``image_anchor``) and replays what came after.
@@ -276,34 +301,58 @@ class BeliefBuffer:
             raise ValueError(f"image observation rejected: {problem}")
         k, t0, belief = self._latest_at_or_before(t)
         prior = self.bank.predict(belief, t - t0)
-        self._insert(k, _Event(float(t), observation=observation), observation.apply(prior))
+        k = self._insert(k, _Event(float(t), observation=observation), observation.apply(prior))
         self._replay_from(k + 1)
 
     # ----------------------------------------------------------------- internals
-    def _insert(self, k: int, event: _Event, belief: np.ndarray) -> None:
-        self._events.insert(k, event)
-        self._beliefs.insert(k, belief)
-        self._times.insert(k, event.time_s)
+    def _own(self) -> int:
+        """Gives this buffer a private log of its events (when it shares one); returns
+        by how much the log indices moved down."""
+        if self._private:
+            return 0
+        log, start, end = self._log, self._start, self._end
+        self._log = _Log(log.events[start:end], log.beliefs[start:end], log.times[start:end])
+        self._start, self._end, self._private = 0, end - start, True
+        return start
+
+    def _insert(self, k: int, event: _Event, belief: np.ndarray) -> int:
+        """Inserts ``event`` at log index k; returns its log index."""
+        log = self._log
+        if not (k == self._end == len(log.times)):  # not an append at the log's end
+            k -= self._own()
+            log = self._log
+        log.events.insert(k, event)
+        log.beliefs.insert(k, belief)
+        log.times.insert(k, event.time_s)
+        self._end += 1
+        return k
 
     def _replay_from(self, k: int) -> None:
-        for i in range(k, len(self._events)):
-            t0, previous = (self._times[i - 1], self._beliefs[i - 1]) if i else (
+        """Filters the events from log index k on again."""
+        if k >= self._end:
+            return
+        k -= self._own()
+        log = self._log
+        for i in range(k, self._end):
+            t0, previous = (log.times[i - 1], log.beliefs[i - 1]) if i > self._start else (
                 self._anchor_time, self._anchor)
-            event = self._events[i]
+            event = log.events[i]
             dt = event.time_s - t0
             if event.reading is not None:
-                self._beliefs[i] = self.bank.step_unchecked(previous, dt, event.reading)
+                log.beliefs[i] = self.bank.step_unchecked(previous, dt, event.reading)
             else:
-                self._beliefs[i] = event.observation.apply(self.bank.predict(previous, dt))
+                log.beliefs[i] = event.observation.apply(self.bank.predict(previous, dt))
 
     def _prune(self) -> None:
+        log = self._log
         cutoff = self._now - self.horizon_s
-        drop = bisect.bisect_left(self._times, cutoff)
+        drop = bisect.bisect_left(log.times, cutoff, self._start, self._end) - self._start
         # Keep at least the newest event so the present belief stays stored.
-        drop = min(drop, len(self._events) - 1)
+        drop = min(drop, self._end - self._start - 1)
         if drop > 0:
-            self._anchor_time = self._times[drop - 1]
-            self._anchor = self._beliefs[drop - 1]
-            del self._events[:drop]
-            del self._beliefs[:drop]
-            del self._times[:drop]
+            self._anchor_time = log.times[self._start + drop - 1]
+            self._anchor = log.beliefs[self._start + drop - 1]
+            self._start += drop
+            if self._start >= max(COMPACT_AFTER, self._end - self._start):
+                self._private = False  # compact: a new log, the old one left to others
+                self._own()
