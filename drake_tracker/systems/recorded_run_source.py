@@ -39,9 +39,18 @@ class RecordedRunSource(LeafSystem):
                                      {self.time_ticket()})
         self.DeclareAbstractOutputPort("depth_frame", lambda: AbstractValue.Make(
             DepthFrame.empty()), self._calc_frame, {self.time_ticket()})
+        # The outputs are functions of time alone: the latest lookups are kept (the
+        # three ports are read at every step, at the same time), and each image's
+        # DepthFrame is made once, when it is first shown.
+        self._reading_at = (float("nan"), -1)
+        self._frame_at = (-1, DepthFrame.empty())
 
     def _latest_reading(self, t: float) -> int:
-        return int(np.searchsorted(self._run.reading_times_s, t, side="right")) - 1
+        at, k = self._reading_at
+        if t != at:
+            k = int(np.searchsorted(self._run.reading_times_s, t, side="right")) - 1
+            self._reading_at = (t, k)
+        return k
 
     def _calc_position(self, context, output: BasicVector):
         k = self._latest_reading(context.get_time())
@@ -53,11 +62,15 @@ class RecordedRunSource(LeafSystem):
 
     def _calc_frame(self, context, output):
         j = int(np.searchsorted(self._arrivals, context.get_time(), side="right")) - 1
+        if j != self._frame_at[0]:
+            self._frame_at = (j, self._frame(j))
+        output.set_value(self._frame_at[1])
+
+    def _frame(self, j: int) -> DepthFrame:
+        """The j-th image to arrive (``DepthFrame.empty()`` for j < 0)."""
         if j < 0:
-            output.set_value(DepthFrame.empty())
-            return
+            return DepthFrame.empty()
         i = int(self._arrival_order[j])
         run = self._run
-        output.set_value(DepthFrame(float(run.image_capture_times_s[i]),
-                                    float(run.image_arrival_times_s[i]),
-                                    run.depth_images_m[i], i))
+        return DepthFrame(float(run.image_capture_times_s[i]),
+                          float(run.image_arrival_times_s[i]), run.depth_images_m[i], i)
