@@ -77,23 +77,49 @@ def test_an_occluded_image_is_not_dragged_away_and_tightens_the_estimate_far_les
     assert all(seen.occluded > 0.6 for _, _, _, seen in occluded_runs)  # and says so
 
 
-def _grow_naive(seed, depth, allowed, max_step, steps):
-    """Breadth-first growth, pixel by pixel: the reference for ``grow_surface``."""
+def _steps_naive(seed, depth, allowed, max_step, steps):
+    """Breadth-first growth, pixel by pixel: the reference for ``surface_steps`` (the
+    step at which each pixel is reached, -1 where it is not)."""
     h, w = seed.shape
-    mask = seed.copy()
+    reached = np.where(seed, 0, -1)
     frontier = [tuple(p) for p in np.argwhere(seed)]
-    for _ in range(steps):
+    for step in range(1, steps + 1):
         nxt = []
         for i, j in frontier:
             for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
                 a, b = i + di, j + dj
-                if (0 <= a < h and 0 <= b < w and not mask[a, b] and allowed[a, b]
+                if (0 <= a < h and 0 <= b < w and reached[a, b] < 0 and allowed[a, b]
                         and np.isfinite(depth[a, b])
                         and abs(depth[a, b] - depth[i, j]) < max_step):
-                    mask[a, b] = True
+                    reached[a, b] = step
                     nxt.append((a, b))
         frontier = nxt
-    return mask
+    return reached
+
+
+def _steps_numpy(seed, depth, allowed, max_step, steps):
+    """The former whole-image numpy growth (one np.roll per direction and step): a
+    second reference for ``surface_steps``."""
+    mask = np.asarray(seed, bool).copy()
+    reached = np.where(mask, 0, -1)
+    z = np.where(np.isfinite(depth), depth, np.inf)
+    open_ = np.asarray(allowed, bool) & np.isfinite(z)
+    for step in range(1, steps + 1):
+        added = np.zeros_like(mask)
+        for axis, shift in ((0, 1), (0, -1), (1, 1), (1, -1)):
+            from_mask = np.roll(mask, shift, axis)
+            from_z = np.roll(z, shift, axis)
+            edge = [slice(None)] * 2
+            edge[axis] = slice(0, 1) if shift == 1 else slice(-1, None)
+            from_mask[tuple(edge)] = False  # no wrap-around
+            with np.errstate(invalid="ignore"):
+                close = np.abs(z - from_z) < max_step
+            added |= from_mask & open_ & ~mask & close
+        if not added.any():
+            break
+        mask |= added
+        reached[added] = step
+    return reached
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -103,16 +129,37 @@ def test_grow_surface_equals_a_breadth_first_reference(seed):
     rng = np.random.default_rng(seed)
     depth = np.round(rng.uniform(0.4, 0.6, (12, 17)), 2)  # steps of 0.01-0.2 m
     depth[rng.random(depth.shape) < 0.1] = np.nan
+    depth[rng.random(depth.shape) < 0.03] = np.inf
     seed_mask = rng.random(depth.shape) < 0.05
     allowed = rng.random(depth.shape) < 0.8
-    for steps in (0, 1, 3, 20):
-        expected = _grow_naive(seed_mask, depth, allowed, 0.05, steps)
-        np.testing.assert_array_equal(grow_surface(seed_mask, depth, allowed, 0.05, steps),
-                                      expected)
-        if steps > 0:  # the pixels first reached at the last step
-            last = expected & ~_grow_naive(seed_mask, depth, allowed, 0.05, steps - 1)
+    for max_step in (0.05, np.inf):
+        for steps in (0, 1, 3, 20, depth.size):
+            expected = _steps_naive(seed_mask, depth, allowed, max_step, steps)
             np.testing.assert_array_equal(
-                surface_steps(seed_mask, depth, allowed, 0.05, steps) == steps, last)
+                surface_steps(seed_mask, depth, allowed, max_step, steps), expected)
+            np.testing.assert_array_equal(
+                grow_surface(seed_mask, depth, allowed, max_step, steps), expected >= 0)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_growth_equals_the_former_numpy_growth_on_image_sized_inputs(seed):
+    from drake_tracker.core.occlusion import OCCLUDER_GROWTH_PX, surface_steps
+
+    rng = np.random.default_rng(10 + seed)
+    # An 80x60 scene of a few flat surfaces with noise, holes and a seed blob on one.
+    rows, cols = np.mgrid[0:60, 0:80]
+    depth = np.where(cols < 30, 0.8, np.where(rows < 25, 1.2, 0.5)) + rng.normal(
+        0.0, 0.004, (60, 80))
+    depth[rng.random(depth.shape) < 0.05] = np.nan
+    seed_mask = (np.abs(rows - 30) < 4) & (np.abs(cols - 45) < 6)
+    allowed = rng.random(depth.shape) < 0.95
+    for max_step, steps in ((0.03, OCCLUDER_GROWTH_PX), (0.03, depth.size),
+                            (np.inf, depth.size)):
+        np.testing.assert_array_equal(
+            surface_steps(seed_mask, depth, allowed, max_step, steps),
+            _steps_numpy(seed_mask, depth, allowed, max_step, steps))
+    with pytest.raises(ValueError, match="one \\(H, W\\) shape"):
+        surface_steps(seed_mask, depth[:, :-1], allowed, 0.03, 3)
 
 
 def test_a_hidden_arm_keeps_the_bias_it_had_learnt(apollo):
