@@ -35,6 +35,46 @@ def test_changed_pixels_count_only_what_the_image_sees():
     assert changed_visible_pixels(base, moved[None], invalid, PARAMS)[0] == 2
 
 
+def _changed_numpy(base_m, moved_m, observed_m, params, occluders=True):
+    """The former whole-image numpy count: the reference for the compiled one."""
+    from drake_tracker.core.likelihood import pixel_sigma, valid_pixels
+
+    base = np.asarray(base_m, float)[None]
+    moved = np.asarray(moved_m, float)
+    observed = np.asarray(observed_m, float)
+    valid = valid_pixels(observed, params)
+    z = np.where(valid, observed, 1.0)[None]
+    sigma3 = 3.0 * pixel_sigma(z, params)
+    with np.errstate(invalid="ignore"):
+        differ = np.isfinite(base) != np.isfinite(moved)
+        differ |= np.isfinite(base) & np.isfinite(moved) & (np.abs(base - moved) > sigma3)
+        nearer = np.minimum(base, moved)
+        seen = z >= nearer - sigma3 if occluders else True
+    return np.count_nonzero(differ & seen & valid[None], axis=(1, 2))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_count_equals_the_whole_image_numpy_count(seed):
+    rng = np.random.default_rng(seed)
+    base = np.where(rng.random((60, 80)) < 0.3, rng.uniform(0.5, 2.0, (60, 80)), np.inf)
+    moved = np.repeat(base[None], 14, axis=0)
+    change = rng.random(moved.shape) < 0.1
+    moved[change] = np.where(rng.random(change.sum()) < 0.5, np.inf,
+                             rng.uniform(0.5, 2.0, change.sum()))
+    moved[rng.random(moved.shape) < 0.05] += rng.normal(0.0, 0.01, 1)  # near 3 sigma
+    moved[0, 0, :5] = np.nan
+    observed = np.where(np.isfinite(base), base, 2.5) + rng.normal(0.0, 0.05, base.shape)
+    observed[rng.random(base.shape) < 0.1] = np.nan
+    observed[rng.random(base.shape) < 0.05] = 0.3  # occluders in front
+    observed[rng.random(base.shape) < 0.02] = 20.0  # beyond max_depth_m
+    for occluders in (True, False):
+        np.testing.assert_array_equal(
+            changed_visible_pixels(base, moved, observed, PARAMS, occluders),
+            _changed_numpy(base, moved, observed, PARAMS, occluders))
+    with pytest.raises(ValueError, match="one image size"):
+        changed_visible_pixels(base, moved[:, :, 1:], observed, PARAMS)
+
+
 @pytest.fixture(scope="module")
 def apollo_view():
     model = build_tracker_model(robot_preset("apollo"))

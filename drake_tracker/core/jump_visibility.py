@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numba import njit
 
 from drake_tracker.core.likelihood import LikelihoodParams, pixel_sigma, valid_pixels
 
@@ -26,19 +27,41 @@ def changed_visible_pixels(base_m: np.ndarray, moved_m: np.ndarray, observed_m: 
     (H, W) by more than 3σ of the pixel noise (robot on one side only counts as a change);
     with ``occluders``, only those whose observed depth is not nearer than the nearer of
     the two renderings by more than 3σ (an occluder in front hides the change). Depths:
-    inf where no robot."""
-    base = np.asarray(base_m, float)[None]
+    inf where no robot. Compiled (``_changed_counts``; tested against the whole-image
+    numpy form)."""
+    base = np.asarray(base_m, float)
     moved = np.asarray(moved_m, float)
     observed = np.asarray(observed_m, float)
+    if base.ndim != 2 or observed.shape != base.shape or moved.shape[1:] != base.shape:
+        raise ValueError(f"base_m and observed_m must be (H, W) and moved_m (N, H, W) of one "
+                         f"image size, got {base.shape}, {observed.shape} and {moved.shape}")
     valid = valid_pixels(observed, params)
-    z = np.where(valid, observed, 1.0)[None]
+    z = np.where(valid, observed, 1.0)
     sigma3 = 3.0 * pixel_sigma(z, params)
-    with np.errstate(invalid="ignore"):
-        differ = np.isfinite(base) != np.isfinite(moved)
-        differ |= np.isfinite(base) & np.isfinite(moved) & (np.abs(base - moved) > sigma3)
-        nearer = np.minimum(base, moved)
-        seen = z >= nearer - sigma3 if occluders else True
-    return np.count_nonzero(differ & seen & valid[None], axis=(1, 2))
+    return _changed_counts(np.ascontiguousarray(base), np.ascontiguousarray(moved),
+                           np.ascontiguousarray(z), np.ascontiguousarray(sigma3), valid,
+                           bool(occluders))
+
+
+@njit(cache=True, nogil=True)
+def _changed_counts(base, moved, z, sigma3, valid, occluders):
+    counts = np.zeros(moved.shape[0], np.int64)
+    for n in range(moved.shape[0]):
+        for i in range(base.shape[0]):
+            for j in range(base.shape[1]):
+                if not valid[i, j]:
+                    continue
+                b, m, s = base[i, j], moved[n, i, j], sigma3[i, j]
+                finite_b, finite_m = np.isfinite(b), np.isfinite(m)
+                differ = finite_b != finite_m or (finite_b and finite_m and abs(b - m) > s)
+                if not differ:
+                    continue
+                if occluders:  # np.minimum: NaN if either is NaN
+                    nearer = np.nan if (b != b or m != m) else min(b, m)
+                    if not z[i, j] >= nearer - s:
+                        continue
+                counts[n] += 1
+    return counts
 
 
 def jump_testable(renderer: BatchedDepthRenderer | RenderThenScore, mean: np.ndarray,
