@@ -154,12 +154,12 @@ class FramePoseInWorld(LeafSystem):
         super().__init__()
         self._plant, self._frame = plant, frame
         self._plant_context = plant.CreateDefaultContext()
-        positions = self.DeclareVectorInputPort("positions", plant.num_positions())
+        self._positions = self.DeclareVectorInputPort("positions", plant.num_positions())
         self.DeclareAbstractOutputPort("X_WF", lambda: AbstractValue.Make(RigidTransform()),
-                                       self._calc, {positions.ticket()})
+                                       self._calc, {self._positions.ticket()})
 
     def _calc(self, context, output) -> None:
-        self._plant.SetPositions(self._plant_context, self.get_input_port().Eval(context))
+        self._plant.SetPositions(self._plant_context, self._positions.Eval(context))
         output.set_value(self._frame.CalcPoseInWorld(self._plant_context))
 
 

@@ -57,13 +57,14 @@ class EncoderKinematicsPose(LeafSystem):
                                for n in robot_joint_names])
         self._C = self._plant.GetFrameByName(robot_config.camera_frame)
         self._E = self._plant.GetFrameByName(robot_config.end_effector_frame)
-        readings = self.DeclareVectorInputPort("measured_position", len(robot_joint_names))
+        self._readings = self.DeclareVectorInputPort("measured_position",
+                                                     len(robot_joint_names))
         self.DeclareAbstractOutputPort("X_CE", lambda: AbstractValue.Make(RigidTransform()),
-                                       self._calc, {readings.ticket()})
+                                       self._calc, {self._readings.ticket()})
 
     def _calc(self, context, output) -> None:
         q = self._plant.GetPositions(self._context)
-        q[self._rows] = self.get_input_port(0).Eval(context)
+        q[self._rows] = self._readings.Eval(context)
         self._plant.SetPositions(self._context, q)
         output.set_value(self._plant.CalcRelativeTransform(self._context, self._C, self._E))
 
@@ -86,7 +87,7 @@ class HealthToUsable(LeafSystem):
         health = self.DeclareAbstractInputPort("health", AbstractValue.Make(TrackerHealth()))
         self.DeclareVectorOutputPort(
             "usable", 1, lambda c, o: o.SetAtIndex(
-                0, float(self.get_input_port(0).Eval(c).state != HealthState.LOST)),
+                0, float(health.Eval(c).state != HealthState.LOST)),
             {health.ticket()})
 
 

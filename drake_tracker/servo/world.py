@@ -104,18 +104,19 @@ class JointServoReference(LeafSystem):
         self._nq = plant.num_positions()
         m = len(arm_joints)
         self._m = m
-        command = self.DeclareVectorInputPort("arm_command", 1 + 2 * m)
-        bias = self.DeclareVectorInputPort("encoder_bias", len(robot_joint_names))
+        self._command = self.DeclareVectorInputPort("arm_command", 1 + 2 * m)
+        self._bias = self.DeclareVectorInputPort("encoder_bias", len(robot_joint_names))
         # Computed again only when an input changes: the plant reads it at every step,
         # after each of the other systems' updates.
         self.DeclareVectorOutputPort("desired_state", self._nq + plant.num_velocities(),
-                                     self._calc, {command.ticket(), bias.ticket()})
+                                     self._calc,
+                                     {self._command.ticket(), self._bias.ticket()})
 
     def _calc(self, context, output: BasicVector) -> None:
-        command = self.GetInputPort("arm_command").Eval(context)
+        command = self._command.Eval(context)
         x = np.concatenate([self._home, np.zeros(self._nq)])
         if command[0] > 0.5:
-            bias = self.GetInputPort("encoder_bias").Eval(context)[self._arm_in_robot]
+            bias = self._bias.Eval(context)[self._arm_in_robot]
             x[self._arm_rows] = command[1:1 + self._m] - bias
             x[self._nq + self._arm_rows] = command[1 + self._m:]
         output.SetFromVector(x)
