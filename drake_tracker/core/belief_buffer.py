@@ -308,8 +308,11 @@ class BeliefBuffer:
     def _own(self) -> int:
         """Gives this buffer a private log of its events (when it shares one); returns
         by how much the log indices moved down."""
-        if self._private:
-            return 0
+        return 0 if self._private else self._new_log()
+
+    def _new_log(self) -> int:
+        """Moves this buffer's events to a new log of its own (the old one is left to any
+        copy that shares it); returns by how much the log indices moved down."""
         log, start, end = self._log, self._start, self._end
         self._log = _Log(log.events[start:end], log.beliefs[start:end], log.times[start:end])
         self._start, self._end, self._private = 0, end - start, True
@@ -354,5 +357,4 @@ class BeliefBuffer:
             self._anchor = log.beliefs[self._start + drop - 1]
             self._start += drop
             if self._start >= max(COMPACT_AFTER, self._end - self._start):
-                self._private = False  # compact: a new log, the old one left to others
-                self._own()
+                self._new_log()  # compact: drop the pruned events
