@@ -133,6 +133,8 @@ def _check_camera(c: CameraConfig) -> None:
     require(isinstance(c.render_stride, int) and not isinstance(c.render_stride, bool)
             and 1 <= c.render_stride <= min(c.width, c.height), "camera.render_stride",
             c.render_stride, "must be an integer from 1 to the image's smaller side")
+    require(0 <= c.curved_surface_tolerance_m < 0.01, "camera.curved_surface_tolerance_m",
+            c.curved_surface_tolerance_m, "must be in [0, 0.01) m (0: Drake's own shapes)")
     require_length(c.offset, 6, "camera.offset", "numbers [x y z rx ry rz]")
     for joint, gains in c.offset_gain_per_rad.items():
         require_length(gains, 6, f"camera.offset_gain_per_rad[{joint}]")

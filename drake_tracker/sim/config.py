@@ -149,6 +149,11 @@ class CameraConfig:
     #: ``CameraIntrinsics.subsampled(render_stride)`` (``sim.depth_camera``). 1: full
     #: resolution. The demo sets it to the tracker's stride (it renders what is read).
     render_stride: int = 1
+    #: The camera sees spheres, cylinders, capsules and ellipsoids as triangle meshes
+    #: within this distance of their true surface (m; ``sim.curved_shapes``), for the
+    #: renderer only. RenderEngineVtk's own sphere has about 5000 triangles, half of
+    #: each render's time for Apollo's three. 0: Drake's own shapes.
+    curved_surface_tolerance_m: float = 0.0003
     #: The TRUE camera pose relative to the nominal one: [x, y, z] (m) then
     #: [rx, ry, rz] (rad), the six virtual joints' values.
     offset: list[float] = field(
