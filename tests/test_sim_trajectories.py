@@ -142,3 +142,21 @@ def test_free_motion_equals_its_joint_by_joint_formula(kind, joints):
                                    atol=1e-15)  # the same sines, summed in another order
     np.testing.assert_allclose(traj.positions(times), _plain_free(traj, times), rtol=0,
                                atol=1e-15)
+
+
+@pytest.mark.parametrize(("kind", "joints"), [
+    ("sinusoid", []), ("sinusoid", ["j0", "j2"]), ("sinusoid", ["j1", "j1", "j2"]),
+    ("free", []), ("free", ["j0", "j2"]), ("free", ["j1", "j1", "j2"]),
+    ("in-out-in", ["j0", "j1"]), ("static", [])])
+def test_position_at_one_time_equals_positions_bit_for_bit(kind, joints):
+    config = TrajectoryConfig(kind=kind, joints=joints, amplitude_deg=19.0, period_s=2.9,
+                              speed_scale=1.3, home_deg={"j1": 12.0}, excursion_joint="j2",
+                              excursion_start_s=1.0, excursion_duration_s=2.0,
+                              excursion_ramp_s=0.5)
+    traj = make_joint_trajectory(config, NAMES, None, seed=4)
+    times = np.concatenate([np.arange(0.0, 4.0, 1e-3),
+                            np.random.default_rng(3).uniform(-5.0, 1e4, 2000)])
+    for t in times:
+        np.testing.assert_array_equal(traj.position_at(t), traj.positions(t)[0])
+    traj.period_s = 1.1  # a change of the cached periods is followed here too
+    np.testing.assert_array_equal(traj.position_at(0.37), traj.positions(0.37)[0])

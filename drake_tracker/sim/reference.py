@@ -64,7 +64,7 @@ class ReferenceMotion:
     def positions(self, t: float) -> np.ndarray:
         """(nq,) plant positions at time ``t`` (s)."""
         q = np.zeros(self.num_positions)
-        robot_q = self._trajectory.positions(t)[0]
+        robot_q = self._trajectory.position_at(t)
         q[self._robot_idx] = robot_q
         q[self._virtual_idx] = self.camera_offset(robot_q)
         return q

@@ -95,6 +95,26 @@ class JointTrajectory:
                 t, *self.excursion_window)
         return q
 
+    def position_at(self, t: float) -> np.ndarray:
+        """(n,) positions at the single time ``t`` (s): the numbers of
+        ``positions([t])[0]``, the same operations on each joint, with a few numpy calls
+        instead of a dozen (the world's encoders read it 1000 times a simulated second)."""
+        if self.kind == "sinusoid" and len(self.moved):
+            moved, periods, phases, unique = self._sinusoids()
+            if unique:
+                q = np.array(self.home, float)
+                q[moved] += self.amplitude * np.sin(2 * np.pi * float(t) / periods + phases)
+                return q
+        elif self.kind == "free" and len(self.moved) and self._sinusoids()[3]:
+            arg = 2 * np.pi * (float(t) * self.freqs) + self.phases
+            q = np.array(self.home, float)
+            q[self.moved] += self.amplitude * np.einsum("km,km->k", np.sin(arg), self.weights)
+            return q
+        elif self.kind == "static" or not len(self.moved):
+            if self.kind != "in-out-in" or self.excursion_index < 0:
+                return np.array(self.home, float)
+        return self.positions(t)[0]
+
     def _sinusoids(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
         """The moved joints, their periods ``period_s (1 + 0.17 k)`` and phases
         ``k pi / 3`` (k-th moved joint), and whether no joint is listed twice; kept
