@@ -16,7 +16,9 @@
 * a ``TruthSystem`` (true joint angles, true camera offset, true hand pose in the true
   camera frame, all of the world robot), the
   :class:`~drake_tracker.sim.encoders.BiasedEncoders` (reading the world robot's
-  joints) and the depth camera of :mod:`drake_tracker.sim.depth_camera`.
+  joints) and the depth camera of :mod:`drake_tracker.sim.depth_camera`, which sees
+  curved shapes as meshes within ``camera.curved_surface_tolerance_m`` of their
+  surfaces (:mod:`drake_tracker.sim.curved_shapes`).
 
 The tracker's ``model`` is always the nominal robot of ``scenario``'s RobotConfig.
 """

@@ -40,8 +40,9 @@ class KalmanBankState(SharedAbstractState):
 
 
 class JointKalmanBankSystem(LeafSystem):
-    """Filters every new encoder reading with the per-joint Kalman bank (periodic discrete
-    update), and adopts the delay buffer's belief whenever the buffer applied an image.
+    """Filters every new encoder reading with the per-joint Kalman bank, and adopts the
+    delay buffer's belief whenever the buffer applied an image (a periodic unrestricted
+    update: the belief is discrete state, the time-stamp gate's bookkeeping abstract).
 
     .. pydrake_system::
 
