@@ -56,6 +56,7 @@ from pydrake.systems.sensors import ImageDepth32F, RgbdSensor
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
 from drake_tracker.sim.config import CameraConfig
+from drake_tracker.sim.curved_shapes import tessellate_curved_perception
 from drake_tracker.sim.streams import counter_generator
 
 #: Name of the renderer the simulated camera uses.
@@ -290,8 +291,11 @@ def AddDepthCamera(builder: DiagramBuilder, scene_graph: SceneGraph, parent_fram
     ``parent_frame_id`` (Drake camera axes: +z forward, +x right, +y down) and the
     :class:`DepthCameraSystem` that samples, corrupts and delays its depth images. With
     ``render_stride`` s > 1 the sensor renders the kept rows, and a second one
-    (``NAME_rgbd_columns``, returned by neither) the kept columns."""
+    (``NAME_rgbd_columns``, returned by neither) the kept columns. The curved shapes
+    registered with a perception role so far are given meshes for the renderer
+    (``config.curved_surface_tolerance_m``, :mod:`drake_tracker.sim.curved_shapes`)."""
     ensure_vtk_renderer(scene_graph)
+    tessellate_curved_perception(scene_graph, config.curved_surface_tolerance_m)
     s = config.render_stride
     grids = {"": (1, s)}  # (column stride, row stride)
     if s > 1:

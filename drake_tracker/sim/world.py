@@ -44,7 +44,6 @@ from drake_tracker.robot import (
     build_tracker_model,
 )
 from drake_tracker.sim.config import Scenario, scenario_occluders
-from drake_tracker.sim.curved_shapes import tessellate_curved_perception
 from drake_tracker.sim.depth_camera import AddDepthCamera, DepthCameraSystem
 from drake_tracker.sim.encoders import BiasedEncoders
 from drake_tracker.sim.environment import add_environment
@@ -207,7 +206,6 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
                                ee_frame)
     AddOccluders(builder, scene_graph, occluders, positions, name=f"{name}_occluders")
 
-    tessellate_curved_perception(scene_graph, scenario.camera.curved_surface_tolerance_m)
     truth, encoders = add_truth_and_encoders(builder, plant, positions, scenario, robot_names,
                                              camera_frame, ee_frame, name)
     camera_body = plant.GetBodyByName(camera_frame.body().name())
