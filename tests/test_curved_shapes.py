@@ -60,7 +60,7 @@ def _distance_to_surface(shape, p):
                                                         cap, np.hypot(side, cap)))
 
 
-@pytest.mark.parametrize("shape", [Sphere(0.06), Sphere(0.3), Cylinder(0.05, 0.2),
+@pytest.mark.parametrize("shape", [Sphere(0.06), Sphere(0.09), Cylinder(0.05, 0.2),
                                    Capsule(0.04, 0.1)])
 def test_the_meshes_stay_within_the_tolerance_and_use_the_fewest_segments(shape):
     rng = np.random.default_rng(5)
@@ -142,6 +142,23 @@ def test_the_camera_renders_the_meshes_like_drakes_own_shapes():
     shared = np.abs(a[both] - b[both])
     assert np.median(shared) <= TOLERANCE_M
     assert np.percentile(shared, 95) <= 2 * TOLERANCE_M + 1e-4
+
+
+def test_a_shape_too_large_for_the_tolerance_keeps_drakes_own():
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    plant.RegisterVisualGeometry(plant.world_body(), RigidTransform(), Sphere(0.5), "big",
+                                 np.array([1.0, 1.0, 1.0, 1.0]))
+    plant.RegisterVisualGeometry(plant.world_body(), RigidTransform([2.0, 0.0, 0.0]),
+                                 Sphere(0.05), "small", np.array([1.0, 1.0, 1.0, 1.0]))
+    plant.Finalize()
+    assert tessellate_curved_perception(scene_graph, TOLERANCE_M) == 1
+    inspector = scene_graph.model_inspector()
+    kept = {inspector.GetName(g): type(inspector.GetShape(g)).__name__
+            for g in inspector.GetAllGeometryIds(Role.kPerception)}
+    assert kept == {"big": "Sphere", "small_tessellated": "Mesh"}
+    with pytest.raises(ValueError, match="needs more than 48 segments"):
+        segments_for(Sphere(0.5), TOLERANCE_M)
 
 
 def test_a_negative_tolerance_is_an_error():

@@ -13,7 +13,8 @@ polygon straddles the true surface), with the fewest segments around the axis, a
 multiple of 4, for which no point of it is farther than ``tolerance_m`` from the true
 surface: :func:`sphere_deviation` measures a unit sphere's lathe, the worst of the
 four kinds (a cylinder's side deviates less, and a capsule is a sphere's halves on
-a cylinder), and scales it by the shape's largest radius.
+a cylinder), and scales it by the shape's largest radius. A shape that would need
+more than ``MAX_SEGMENTS`` (RenderEngineVtk's own have 50) keeps Drake's own.
 """
 
 from __future__ import annotations
@@ -40,8 +41,10 @@ from drake_tracker.core.geometry import sphere_mesh, tessellate_shape
 
 #: The shapes replaced.
 CURVED_SHAPES = (Sphere, Cylinder, Capsule, Ellipsoid)
-#: The most segments around the axis a replacement may have.
-MAX_SEGMENTS = 256
+#: The most segments around the axis a replacement may have: RenderEngineVtk's own
+#: spheres and cylinders have 50, so a replacement never has more triangles than the
+#: shape it replaces. A shape that would need more keeps Drake's own.
+MAX_SEGMENTS = 48
 #: Barycentric sampling density of :func:`surface_points`.
 _SAMPLES_PER_EDGE = 16
 
@@ -111,7 +114,8 @@ def tessellate_curved_perception(scene_graph: SceneGraph, tolerance_m: float) ->
     """Gives every curved shape with a perception role in ``scene_graph`` (its model,
     before a Context is made) a perception-only mesh within ``tolerance_m`` of its
     surface in its place (see the module doc). Returns how many were replaced; 0
-    tolerance replaces none."""
+    tolerance replaces none, and a shape that would need more than ``MAX_SEGMENTS``
+    (at 0.3 mm, a sphere of radius over 9 cm) keeps Drake's own."""
     if not tolerance_m >= 0:
         raise ValueError(f"tolerance_m must be >= 0, got {tolerance_m}")
     if tolerance_m == 0:
@@ -123,6 +127,8 @@ def tessellate_curved_perception(scene_graph: SceneGraph, tolerance_m: float) ->
         shape = inspector.GetShape(geometry_id)
         if not isinstance(shape, CURVED_SHAPES):
             continue
+        if sphere_deviation(MAX_SEGMENTS) * largest_radius_m(shape) > tolerance_m:
+            continue  # too large for the tolerance: Drake's own shape is the better trade
         source_id = owner[inspector.GetOwningSourceName(geometry_id)]
         name = inspector.GetName(geometry_id)
         properties = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
