@@ -63,6 +63,7 @@ def test_demo_writes_report_with_both_methods(demo_run):
             assert set(summary) == {"p1", "p25", "p50", "p75", "p99"}
             assert all(v == v for v in summary.values())  # no NaN
     assert report["real_time_factor"] > 0
+    assert report["kernel_warm_up_s"] > 0  # loaded before the simulation, not in it
     # Every update ran on the worker (image.update_latency_s 0.08 by default), and was
     # either done at its deadline or waited for.
     assert report["image_updates_late"] + report["image_updates_on_time"] >= 1
