@@ -37,7 +37,7 @@ from pydrake.geometry import (
     Sphere,
 )
 
-from drake_tracker.core.geometry import sphere_mesh, tessellate_shape
+from drake_tracker.core.geometry import obj_text, sphere_mesh, tessellate_shape
 
 #: The shapes replaced.
 CURVED_SHAPES = (Sphere, Cylinder, Capsule, Ellipsoid)
@@ -75,39 +75,33 @@ def largest_radius_m(shape: Shape) -> float:
     return shape.radius()
 
 
+def _fewest_segments(shape: Shape, tolerance_m: float) -> int | None:
+    """:func:`segments_for`'s count, or None when it would exceed ``MAX_SEGMENTS``."""
+    radius = largest_radius_m(shape)
+    for segments in range(8, MAX_SEGMENTS + 1, 4):
+        if sphere_deviation(segments) * radius <= tolerance_m:
+            return segments
+    return None
+
+
 def segments_for(shape: Shape, tolerance_m: float) -> int:
     """The fewest segments around the axis, a multiple of 4 from 8, whose lathe of
     ``shape`` stays within ``tolerance_m`` of its surface."""
     if not tolerance_m > 0:
         raise ValueError(f"tolerance_m must be > 0, got {tolerance_m}")
-    radius = largest_radius_m(shape)
-    for segments in range(8, MAX_SEGMENTS + 1, 4):
-        if sphere_deviation(segments) * radius <= tolerance_m:
-            return segments
-    raise ValueError(f"a {type(shape).__name__} of radius {radius} m needs more than "
-                     f"{MAX_SEGMENTS} segments for a tolerance of {tolerance_m} m")
+    segments = _fewest_segments(shape, tolerance_m)
+    if segments is None:
+        raise ValueError(f"a {type(shape).__name__} of radius {largest_radius_m(shape)} m "
+                         f"needs more than {MAX_SEGMENTS} segments for a tolerance of "
+                         f"{tolerance_m} m")
+    return segments
 
 
-def obj_text(vertices: np.ndarray, triangles: np.ndarray) -> str:
-    """A Wavefront OBJ of the mesh with area-weighted vertex normals (Drake's OBJ reader
-    requires normals)."""
-    corners = vertices[triangles]
-    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    normals = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(normals, triangles[:, k], face)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
-    lines += [f"vn {x:.9g} {y:.9g} {z:.9g}" for x, y, z in normals]
-    lines += ["f " + " ".join(f"{i + 1}//{i + 1}" for i in tri) for tri in triangles]
-    return "\n".join(lines) + "\n"
-
-
-def tessellated_mesh(shape: Shape, tolerance_m: float, name: str) -> Mesh:
-    """``shape`` as an in-memory OBJ Mesh within ``tolerance_m`` of its surface."""
-    v, t = tessellate_shape(shape, segments_for(shape, tolerance_m))
-    return Mesh(InMemoryMesh(mesh_file=MemoryFile(obj_text(v, t), ".obj",
-                                                  f"{name} (tessellated)")))
+def _tessellated_mesh(shape: Shape, segments: int, tolerance_m: float, name: str) -> Mesh:
+    """``shape``'s lathe of ``segments`` as an in-memory OBJ Mesh."""
+    v, t = tessellate_shape(shape, segments)
+    text = obj_text(v, t, f"{name}: {type(shape).__name__} within {tolerance_m} m")
+    return Mesh(InMemoryMesh(mesh_file=MemoryFile(text, ".obj", f"{name} (tessellated)")))
 
 
 def tessellate_curved_perception(scene_graph: SceneGraph, tolerance_m: float) -> int:
@@ -127,13 +121,14 @@ def tessellate_curved_perception(scene_graph: SceneGraph, tolerance_m: float) ->
         shape = inspector.GetShape(geometry_id)
         if not isinstance(shape, CURVED_SHAPES):
             continue
-        if sphere_deviation(MAX_SEGMENTS) * largest_radius_m(shape) > tolerance_m:
+        segments = _fewest_segments(shape, tolerance_m)
+        if segments is None:
             continue  # too large for the tolerance: Drake's own shape is the better trade
         source_id = owner[inspector.GetOwningSourceName(geometry_id)]
         name = inspector.GetName(geometry_id)
         properties = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
         instance = GeometryInstance(inspector.GetPoseInFrame(geometry_id),
-                                    tessellated_mesh(shape, tolerance_m, name),
+                                    _tessellated_mesh(shape, segments, tolerance_m, name),
                                     f"{name}_tessellated")
         frame_id = inspector.GetFrameId(geometry_id)
         scene_graph.RemoveRole(source_id, geometry_id, Role.kPerception)
