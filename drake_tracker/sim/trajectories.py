@@ -73,23 +73,13 @@ class JointTrajectory:
         t = np.atleast_1d(np.asarray(t, float))
         q = np.empty((len(t), len(self.home)))
         q[:] = self.home
-        if self.kind == "sinusoid" and len(self.moved):
-            # Moved joint k's formula, the same operations for all k at once.
-            moved, periods, phases, unique = self._sinusoids()
-            terms = self.amplitude * np.sin(2 * np.pi * t[:, None] / periods + phases)
+        terms = self._moved_terms(t)
+        if terms is not None:
+            moved, _, _, unique = self._sinusoids()
             if unique:
                 q[:, moved] += terms
-            else:  # a joint listed twice moves by both of its sinusoids
+            else:  # a joint listed twice moves by both of its terms
                 np.add.at(q, (slice(None), moved), terms)
-        elif self.kind in ("free", "in-out-in") and len(self.moved):
-            # Moved joint k: amplitude * sum_m w_km sin(2 pi f_km t + phi_km), all k at once
-            # (the encoders read it 1000 times a simulated second).
-            arg = 2 * np.pi * (t[:, None, None] * self.freqs) + self.phases
-            terms = self.amplitude * np.einsum("tkm,km->tk", np.sin(arg), self.weights)
-            if self._sinusoids()[3]:  # no joint listed twice
-                q[:, self.moved] += terms
-            else:  # a joint listed twice moves by both of its sums
-                np.add.at(q, (slice(None), self.moved), terms)
         if self.kind == "in-out-in" and self.excursion_index >= 0:
             q[:, self.excursion_index] += self.excursion * smooth_window(
                 t, *self.excursion_window)
@@ -97,23 +87,31 @@ class JointTrajectory:
 
     def position_at(self, t: float) -> np.ndarray:
         """(n,) positions at the single time ``t`` (s): the numbers of
-        ``positions([t])[0]``, the same operations on each joint, with a few numpy calls
-        instead of a dozen (the world's encoders read it 1000 times a simulated second)."""
-        if self.kind == "sinusoid" and len(self.moved):
-            moved, periods, phases, unique = self._sinusoids()
-            if unique:
-                q = np.array(self.home, float)
-                q[moved] += self.amplitude * np.sin(2 * np.pi * float(t) / periods + phases)
-                return q
-        elif self.kind == "free" and len(self.moved) and self._sinusoids()[3]:
-            arg = 2 * np.pi * (float(t) * self.freqs) + self.phases
-            q = np.array(self.home, float)
-            q[self.moved] += self.amplitude * np.einsum("km,km->k", np.sin(arg), self.weights)
-            return q
-        elif self.kind == "static" or not len(self.moved):
-            if self.kind != "in-out-in" or self.excursion_index < 0:
-                return np.array(self.home, float)
-        return self.positions(t)[0]
+        ``positions([t])[0]`` (the same terms), with a few numpy calls instead of a dozen
+        (the world's encoders read it 1000 times a simulated second)."""
+        moved, _, _, unique = self._sinusoids()
+        if not unique or (self.kind == "in-out-in" and self.excursion_index >= 0):
+            return self.positions(t)[0]
+        q = np.array(self.home, float)
+        terms = self._moved_terms(np.float64(t))
+        if terms is not None:
+            q[moved] += terms
+        return q
+
+    def _moved_terms(self, t: np.ndarray) -> np.ndarray | None:
+        """The moved joints' motion, (T, k) at times ``t`` (T,), or (k,) at one time (a
+        0-d array); None when no joint moves. The same operations for all k at once:
+        ``sinusoid`` joint k: amplitude sin(2 pi t / T_k + phi_k); ``free`` and
+        ``in-out-in`` joint k: amplitude sum_m w_km sin(2 pi f_km t + phi_km)."""
+        if not len(self.moved):
+            return None
+        if self.kind == "sinusoid":
+            _, periods, phases, _ = self._sinusoids()
+            return self.amplitude * np.sin(2 * np.pi * t[..., None] / periods + phases)
+        if self.kind in ("free", "in-out-in"):
+            arg = 2 * np.pi * (t[..., None, None] * self.freqs) + self.phases
+            return self.amplitude * np.einsum("...km,km->...k", np.sin(arg), self.weights)
+        return None
 
     def _sinusoids(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
         """The moved joints, their periods ``period_s (1 + 0.17 k)`` and phases
