@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from drake_tracker.models.generate_models import apollo_sdf
 
-from drake_tracker.core.geometry import cylinder_mesh, obj_text, sphere_mesh
+from drake_tracker.core.geometry import cylinder_mesh, sphere_mesh
 
 
 def _rounded_box_mesh(size, fillet: float, steps: int):
@@ -53,6 +53,25 @@ def _rounded_box_mesh(size, fillet: float, steps: int):
     return np.vstack(verts), np.vstack(tris)
 
 
+def _obj_text(vertices: np.ndarray, triangles: np.ndarray, comment: str) -> str:
+    """OBJ text with welded vertices and area-weighted vertex normals."""
+    _, first, inverse = np.unique(np.round(vertices, 9), axis=0, return_index=True,
+                                  return_inverse=True)
+    v = vertices[first]
+    t = inverse.reshape(-1)[triangles]
+    t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 2] != t[:, 0])]
+    face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    normals = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(normals, t[:, k], face)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    lines = [f"# {comment}"]
+    lines += [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in v]
+    lines += [f"vn {x:.5f} {y:.5f} {z:.5f}" for x, y, z in normals]
+    lines += [f"f {a}//{a} {b}//{b} {c}//{c}" for a, b, c in t + 1]
+    return "\n".join(lines) + "\n"
+
+
 def write_apollo_hires(folder, segments: int = 96, fillet_steps: int = 5) -> Path:
     """Writes ``apollo_hires.sdf`` and its OBJ meshes into ``folder``; returns the SDF.
 
@@ -77,7 +96,7 @@ def write_apollo_hires(folder, segments: int = 96, fillet_steps: int = 5) -> Pat
             v, t = sphere_mesh(numbers[0], segments)
         name = f"meshes_hires/part_{count:02d}_{kind}.obj"
         count += 1
-        (folder / name).write_text(obj_text(v, t, f"{kind} {numbers}, {len(t)} triangles"))
+        (folder / name).write_text(_obj_text(v, t, f"{kind} {numbers}, {len(t)} triangles"))
         return f"<geometry><mesh><uri>{name}</uri></mesh></geometry>"
 
     sdf = re.sub(r"<geometry><(box|cylinder|sphere)>(.*?)</\1></geometry>", replace,

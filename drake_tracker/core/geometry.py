@@ -200,27 +200,6 @@ def load_obj(path: str | Path, scale: ArrayLike = (1.0, 1.0, 1.0)
     return v, t
 
 
-def obj_text(vertices: np.ndarray, triangles: np.ndarray, comment: str) -> str:
-    """Wavefront OBJ text of a mesh, with a ``comment`` line, welded vertices (equal to
-    1e-9), degenerate triangles dropped and area-weighted vertex normals (Drake's OBJ
-    reader requires normals)."""
-    _, first, inverse = np.unique(np.round(vertices, 9), axis=0, return_index=True,
-                                  return_inverse=True)
-    v = vertices[first]
-    t = inverse.reshape(-1)[triangles]
-    t = t[(t[:, 0] != t[:, 1]) & (t[:, 1] != t[:, 2]) & (t[:, 2] != t[:, 0])]
-    face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    normals = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(normals, t[:, k], face)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    lines = [f"# {comment}"]
-    lines += [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in v]
-    lines += [f"vn {x:.5f} {y:.5f} {z:.5f}" for x, y, z in normals]
-    lines += [f"f {a}//{a} {b}//{b} {c}//{c}" for a, b, c in t + 1]
-    return "\n".join(lines) + "\n"
-
-
 def _mesh_scale(shape) -> np.ndarray:
     if hasattr(shape, "scale3"):
         return np.asarray(shape.scale3(), float)

@@ -37,7 +37,7 @@ from pydrake.geometry import (
     Sphere,
 )
 
-from drake_tracker.core.geometry import obj_text, sphere_mesh, tessellate_shape
+from drake_tracker.core.geometry import sphere_mesh, tessellate_shape
 
 #: The shapes replaced.
 CURVED_SHAPES = (Sphere, Cylinder, Capsule, Ellipsoid)
@@ -97,11 +97,26 @@ def segments_for(shape: Shape, tolerance_m: float) -> int:
     return segments
 
 
-def _tessellated_mesh(shape: Shape, segments: int, tolerance_m: float, name: str) -> Mesh:
+def obj_text(vertices: np.ndarray, triangles: np.ndarray) -> str:
+    """A Wavefront OBJ of the mesh with area-weighted vertex normals (Drake's OBJ reader
+    requires normals)."""
+    corners = vertices[triangles]
+    face = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    lines += [f"vn {x:.9g} {y:.9g} {z:.9g}" for x, y, z in normals]
+    lines += ["f " + " ".join(f"{i + 1}//{i + 1}" for i in tri) for tri in triangles]
+    return "\n".join(lines) + "\n"
+
+
+def _tessellated_mesh(shape: Shape, segments: int, name: str) -> Mesh:
     """``shape``'s lathe of ``segments`` as an in-memory OBJ Mesh."""
     v, t = tessellate_shape(shape, segments)
-    text = obj_text(v, t, f"{name}: {type(shape).__name__} within {tolerance_m} m")
-    return Mesh(InMemoryMesh(mesh_file=MemoryFile(text, ".obj", f"{name} (tessellated)")))
+    return Mesh(InMemoryMesh(mesh_file=MemoryFile(obj_text(v, t), ".obj",
+                                                  f"{name} (tessellated)")))
 
 
 def tessellate_curved_perception(scene_graph: SceneGraph, tolerance_m: float) -> int:
@@ -128,7 +143,7 @@ def tessellate_curved_perception(scene_graph: SceneGraph, tolerance_m: float) ->
         name = inspector.GetName(geometry_id)
         properties = PerceptionProperties(inspector.GetPerceptionProperties(geometry_id))
         instance = GeometryInstance(inspector.GetPoseInFrame(geometry_id),
-                                    _tessellated_mesh(shape, segments, tolerance_m, name),
+                                    _tessellated_mesh(shape, segments, name),
                                     f"{name}_tessellated")
         frame_id = inspector.GetFrameId(geometry_id)
         scene_graph.RemoveRole(source_id, geometry_id, Role.kPerception)
