@@ -79,9 +79,9 @@ def _score_codegen(truncated: bool):
                 d32 = b.fptrunc(b.fdiv(v.const(1.0), iz), _F32_HALF)
                 pixel_d.append(d32)
                 pixel_dz.append(b.fptrunc(b.fsub(z, b.fpext(d32, v.VEC)), _F32_HALF))
-            hits.append(f.join(b, *pixel_hits))
-            dzs.append(f.join(b, *pixel_dz))
-            ds.append(f.join(b, *pixel_d))
+            hits.append(f.join(b, pixel_hits))
+            dzs.append(f.join(b, pixel_dz))
+            ds.append(f.join(b, pixel_d))
             consts.append([f.splat_f32(b, value) for value in column])
         # the mixture in float32, all LANES lanes in one vector
         u, o = f.splat_f32(b, uniform), f.splat_f32(b, occlusion)
@@ -108,7 +108,7 @@ def _score_codegen(truncated: bool):
         sums = [zero] * halves
         for lg, c, hit in zip(logs, consts, hits):
             term = b.select(hit, b.fsub(lg, c[TABLE_LOG_P_OCC_INF]), f.const_f32(0.0))
-            for h, part in enumerate(f.split(b, term)):
+            for h, part in enumerate(f.split(b, term, WIDTH)):
                 sums[h] = b.fadd(sums[h], b.fpext(part, v.VEC))
         for ptr in ptrs:
             b.store(zero, ptr, align=8)

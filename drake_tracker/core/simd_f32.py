@@ -3,7 +3,7 @@
 float32 accuracy from multiplies, adds and bit operations.
 
 The pixel likelihood (:mod:`drake_tracker.core.lane_likelihood`) evaluates its mixture
-in these: half the instructions of two <4 x double> halves, and polynomials of about half
+in these: half the instructions of <8 x double> on AVX2, and polynomials of about half
 the degree that double precision needs (the double-precision versions these replaced are
 in git history, before d9a4b87). Nothing here is called at run time: these functions
 emit IR.
@@ -80,17 +80,24 @@ def splat_f32(b: ir.IRBuilder, scalar: ir.Value) -> ir.Value:
                             ir.Constant(ir.VectorType(I32, WIDTH_F32), [0] * WIDTH_F32))
 
 
-def join(b: ir.IRBuilder, low: ir.Value, high: ir.Value) -> ir.Value:
-    """The 8-lane vector of two 4-lane ones (any element type), ``low`` first."""
+def join(b: ir.IRBuilder, parts: list[ir.Value]) -> ir.Value:
+    """The 8-lane vector of ``parts`` (one 8-lane vector, or two 4-lane ones, lowest
+    first; any element type)."""
+    if len(parts) == 1:
+        return parts[0]
+    low, high = parts
     return b.shuffle_vector(low, high, ir.Constant(ir.VectorType(I32, 2 * 4), list(range(8))))
 
 
-def split(b: ir.IRBuilder, x: ir.Value) -> tuple[ir.Value, ir.Value]:
-    """The two 4-lane halves of an 8-lane vector."""
+def split(b: ir.IRBuilder, x: ir.Value, width: int) -> tuple[ir.Value, ...]:
+    """The ``width``-lane parts of an 8-lane vector, lowest first (x itself for 8)."""
+    if width == WIDTH_F32:
+        return (x,)
     undefined = ir.Constant(x.type, ir.Undefined)
-    return tuple(b.shuffle_vector(x, undefined, ir.Constant(ir.VectorType(I32, 4),
-                                                            list(range(h * 4, h * 4 + 4))))
-                 for h in (0, 1))
+    return tuple(b.shuffle_vector(x, undefined, ir.Constant(ir.VectorType(I32, width),
+                                                            list(range(h * width,
+                                                                       (h + 1) * width))))
+                 for h in range(WIDTH_F32 // width))
 
 
 def horner_f32(b: ir.IRBuilder, xs: list[ir.Value], coeffs: tuple[float, ...]
