@@ -7,6 +7,7 @@ import logging
 
 import numpy as np
 import pytest
+from awkward_stamps import awkward_stamps
 
 from drake_tracker.core.rate_limited_warning import RateLimitedWarning
 from drake_tracker.core.timestamps import StreamClock
@@ -60,25 +61,11 @@ class _FullCheckClock(StreamClock):
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("max_behind_s", [0.0, 1.0])
 def test_the_usual_sample_fast_path_decides_as_the_full_policy(seed, max_behind_s):
-    # A 1 kHz stream with every awkwardness: jitter, repeats, small steps back, glitches
-    # far in the future, steps that stay (forward by more and less than
-    # min_future_jump_s, and back), NaN and inf, and a tight min_future_jump_s so that
-    # the future limit is the recent period's, not the floor's.
-    rng = np.random.default_rng(seed)
+    # A tight min_future_jump_s, so that the future limit is the recent period's, not
+    # the floor's.
     params = TimestampParams(reanchor_after_samples=4, min_future_jump_s=0.02,
                              max_future_jump_periods=10.0)
-    raw, t, offset = [], 0.0, 0.0
-    for _ in range(6000):
-        t += 1e-3 + rng.normal(0.0, 1e-4)
-        event = rng.random()
-        if event < 0.003:
-            offset += rng.choice([-2.0, -0.05, 0.015, 0.05, 40.0])  # a step that stays
-        stamp = t + offset
-        if event > 0.995:
-            stamp += rng.choice([1000.0, 0.03, -0.002, np.nan, np.inf])  # one glitch
-        elif event > 0.99:
-            stamp = raw[-1] if raw else stamp  # a repeated stamp
-        raw.append(stamp)
+    raw = awkward_stamps(seed)
     fast = StreamClock("joint reading", params, max_behind_s)
     full = _FullCheckClock("joint reading", params, max_behind_s)
     decisions = [(fast.check(r), full.check(r)) for r in raw]

@@ -248,6 +248,13 @@ class StreamClock:
 MAX_READING_MAGNITUDE = 1e6
 
 
+def is_new_stamp(raw_s: float, last_raw_s: float) -> bool:
+    """Whether a stamp held on a port is a new sample: it differs from the last one seen
+    (NaN after NaN is the same sample)."""
+    raw, last = float(raw_s), float(last_raw_s)
+    return not (raw == last or (math.isnan(raw) and math.isnan(last)))
+
+
 class ReadingGate:
     """The joint readings' policy: new-sample detection, the stamp's :class:`StreamClock`,
     and one warning per run of non-finite values (an encoder gap).
@@ -285,8 +292,7 @@ class ReadingGate:
 
     def is_new(self, raw_s: float) -> bool:
         """Whether a stamp held on a port is a new sample (differs from the last seen)."""
-        raw = float(raw_s)
-        return not (raw == self.last_raw_s or (math.isnan(raw) and math.isnan(self.last_raw_s)))
+        return is_new_stamp(raw_s, self.last_raw_s)
 
     def admit(self, raw_s: float, values: np.ndarray) -> float | None:
         """The reading's time in the tracker's time base, or None (skipped, logged)."""

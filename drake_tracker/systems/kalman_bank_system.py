@@ -11,13 +11,13 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, Context, EventStatus, LeafSystem
 
+from drake_tracker.core.clock_state import gate_from_vector, gate_to_vector, last_raw_stamp
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
 from drake_tracker.core.pipeline import full_reading, make_bank_and_prior, robot_joint_indices
-from drake_tracker.core.timestamps import ReadingGate
+from drake_tracker.core.timestamps import ReadingGate, is_new_stamp
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
-from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
     from drake_tracker.robot import TrackerModel
@@ -26,23 +26,38 @@ log = logging.getLogger(__name__)
 
 
 @dataclass
-class KalmanBankState(SharedAbstractState):
-    """The bank system's bookkeeping (its abstract state); the belief itself is the
-    discrete state ``belief``. ``time_s``/``last_reading_s`` are None before the first
-    reading; ``correction_id`` is the latest delay-buffer correction adopted. A stored
-    one is never modified (``_update`` changes a ``copy()`` of it, and a copy of the
-    gate), so Drake's two copies of it at every update share it."""
+class KalmanBankState:
+    """The bank system's bookkeeping, read from its discrete state ``bookkeeping``
+    (:meth:`JointKalmanBankSystem.bookkeeping`; the belief is the group ``belief``).
+    ``time_s``/``last_reading_s`` are None before the first reading; ``correction_id``
+    is the latest delay-buffer correction adopted; ``gate`` the readings' time-stamp
+    policy (silent: the delay buffer logs)."""
 
     gate: ReadingGate
     time_s: float | None = None
     last_reading_s: float | None = None
     correction_id: int = 0
 
+    def to_vector(self) -> np.ndarray:
+        """The numbers of the discrete state group (NaN for None)."""
+        head = [np.nan if v is None else v for v in (self.time_s, self.last_reading_s)]
+        return np.concatenate([head, [self.correction_id], gate_to_vector(self.gate)])
+
+    @staticmethod
+    def from_vector(x: np.ndarray, params: TrackerParams,
+                    joint_names: list[str]) -> KalmanBankState:
+        """The state that :meth:`to_vector` gave ``x``."""
+        time_s, last_reading_s, correction_id = x[:3].tolist()
+        return KalmanBankState(
+            gate_from_vector(x[3:], params.timestamps, joint_names),
+            None if np.isnan(time_s) else time_s,
+            None if np.isnan(last_reading_s) else last_reading_s, int(correction_id))
+
 
 class JointKalmanBankSystem(LeafSystem):
     """Filters every new encoder reading with the per-joint Kalman bank, and adopts the
-    delay buffer's belief whenever the buffer applied an image (a periodic unrestricted
-    update: the belief is discrete state, the time-stamp gate's bookkeeping abstract).
+    delay buffer's belief whenever the buffer applied an image (a periodic discrete
+    update: all of its state is numbers).
 
     .. pydrake_system::
 
@@ -72,9 +87,10 @@ class JointKalmanBankSystem(LeafSystem):
     estimated camera in the model's world (RigidTransform). Before the first reading the
     estimate is the model's zero configuration.
 
-    Discrete state ``belief``: the (5, n) moments, row-major (:meth:`belief`); abstract
-    state: :class:`KalmanBankState` (:meth:`bookkeeping`). Readings the delay buffer
-    skips are skipped here too (the buffer logs them).
+    Discrete state: ``belief``, the (5, n) moments, row-major (:meth:`belief`), and
+    ``bookkeeping``, a :class:`KalmanBankState` as numbers (:meth:`bookkeeping`; the
+    gate's through ``core/clock_state.py``). Readings the delay buffer skips are
+    skipped here too (the buffer logs them).
     """
 
     def __init__(self, model: TrackerModel, params: TrackerParams, period_s: float,
@@ -91,8 +107,8 @@ class JointKalmanBankSystem(LeafSystem):
         self._readout = PoseReadout(model)
         n = self._n
         self._belief = self.DeclareDiscreteState(np.zeros(5 * n))
-        self._bookkeeping = self.DeclareAbstractState(AbstractValue.Make(KalmanBankState(
-            ReadingGate(params.timestamps, model.robot_joint_names, logger=None))))
+        self._bookkeeping = self.DeclareDiscreteState(KalmanBankState(
+            ReadingGate(params.timestamps, model.robot_joint_names, logger=None)).to_vector())
         self._reading_port = self.DeclareVectorInputPort("measured_position", self._robot_n)
         self._time_port = self.DeclareVectorInputPort("measurement_time", 1)
         self._correction_port = self.DeclareAbstractInputPort(
@@ -113,7 +129,7 @@ class JointKalmanBankSystem(LeafSystem):
                                        lambda c, o: self._calc_pose(c, o, 1), deps)
         self.DeclareAbstractOutputPort("X_WC", lambda: AbstractValue.Make(RigidTransform()),
                                        lambda c, o: self._calc_pose(c, o, 2), deps)
-        self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(period_s, offset_s, self._update)
 
     # ----------------------------------------------------------------- state access
     def belief(self, context: Context) -> np.ndarray:
@@ -122,30 +138,32 @@ class JointKalmanBankSystem(LeafSystem):
         return context.get_discrete_state(self._belief).get_value().reshape(5, self._n)
 
     def bookkeeping(self, context: Context) -> KalmanBankState:
-        """The :class:`KalmanBankState` (the abstract state) in ``context``."""
-        return context.get_abstract_state(self._bookkeeping).get_value()
+        """The :class:`KalmanBankState` that the discrete state ``bookkeeping`` holds in
+        ``context`` (built from its numbers: changing it changes no state)."""
+        return KalmanBankState.from_vector(
+            context.get_discrete_state(self._bookkeeping).get_value(), self._params,
+            self._model.robot_joint_names)
 
-    def _update(self, context, state) -> EventStatus | None:
-        stored = self.bookkeeping(context)
+    def _update(self, context, discrete_state) -> EventStatus | None:
+        x = context.get_discrete_state(self._bookkeeping).get_value()
         correction = self._correction_port.Eval(context)
-        adopt = correction.id > stored.correction_id and correction.belief is not None
+        adopt = correction.id > int(x[2]) and correction.belief is not None
         raw = float(self._time_port.Eval(context)[0])
-        new_reading = self._params.use_joint_readings and stored.gate.is_new(raw)
+        new_reading = (self._params.use_joint_readings
+                       and is_new_stamp(raw, last_raw_stamp(x[3:])))
         if not (adopt or new_reading):
             return EventStatus.DidNothing()  # Drake keeps the state as it is
         belief = self.belief(context).copy()
-        # The stored bookkeeping is shared with Drake's copies: change a copy of it.
-        s = stored.copy()
+        s = self.bookkeeping(context)
         if adopt:
             belief = correction.belief.copy()
             s.time_s, s.last_reading_s = correction.time_s, correction.last_reading_time_s
             s.correction_id = correction.id
         if new_reading:
             reading = np.array(self._reading_port.Eval(context), float)
-            s.gate = s.gate.copy()
             belief = self._filter(s, s.gate.admit(raw, reading), reading, belief)
-        state.get_mutable_discrete_state(self._belief).SetFromVector(belief.ravel())
-        state.get_mutable_abstract_state(self._bookkeeping).set_value(s)
+        discrete_state.get_mutable_vector(self._belief).SetFromVector(belief.ravel())
+        discrete_state.get_mutable_vector(self._bookkeeping).SetFromVector(s.to_vector())
         return None
 
     def _filter(self, s: KalmanBankState, t: float | None, reading: np.ndarray,
