@@ -69,8 +69,13 @@ class RecordedRun:
         R = len(self.reading_times_s)
         if self.readings_rad.shape != (R, n):
             raise ValueError(f"readings_rad has shape {self.readings_rad.shape}, expected {(R, n)}")
-        if R > 1 and np.any(np.diff(self.reading_times_s) <= 0):
-            raise ValueError("reading_times_s must be strictly increasing")
+        if R > 1 and not np.all(np.diff(self.reading_times_s) > 0):  # NaN fails too
+            k = int(np.flatnonzero(~(np.diff(self.reading_times_s) > 0))[0]) + 1
+            raise ValueError(
+                f"reading_times_s must be strictly increasing and finite: reading {k} is "
+                f"stamped {self.reading_times_s[k]!r} s after {self.reading_times_s[k - 1]!r} s "
+                f"(a recorded log is replayed in stamp order; the live Tracker skips such "
+                f"a reading with a warning)")
         num_images = len(self.image_capture_times_s)
         if len(self.image_arrival_times_s) != num_images:
             raise ValueError("image_arrival_times_s and image_capture_times_s differ in length")

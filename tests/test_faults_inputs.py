@@ -2,6 +2,8 @@
 gave raw Python errors or failed later, an empty parameter file, a corrupt recording,
 and 16-bit millimetre depth images in the offline tracker."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from fast_params import small_params
@@ -74,6 +76,15 @@ def test_a_corrupt_recording_is_a_clear_error_naming_the_file(tmp_path, run):
             RecordedRun.load(path)
         assert str(err.value).startswith(f"{path}: not a") and "pickle" not in str(err.value)
     assert len(RecordedRun.load(good).reading_times_s) == len(run.reading_times_s)
+
+
+@pytest.mark.parametrize("glitch", [1000.0, np.nan, "repeat"])
+def test_a_recording_with_a_glitched_reading_stamp_names_the_reading(run, glitch):
+    stamps = run.reading_times_s.copy()
+    stamps[7] = stamps[6] if glitch == "repeat" else stamps[7] + glitch
+    k = 8 if glitch == 1000.0 else 7  # a glitch forward shows at the next reading
+    with pytest.raises(ValueError, match=rf"strictly increasing and finite: reading {k} "):
+        dataclasses.replace(run, reading_times_s=stamps)
 
 
 def test_sixteen_bit_millimetre_images_are_read_as_metres(apollo, run):
