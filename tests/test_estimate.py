@@ -3,6 +3,7 @@ batched kinematics give."""
 
 import numpy as np
 import pytest
+from pydrake.math import RigidTransform
 
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.robot import build_tracker_model, robot_preset
@@ -24,10 +25,12 @@ def test_one_configuration_gives_exactly_the_batched_poses(robot, request):
         np.testing.assert_array_equal(readout.body_poses(q[k]), kinematics.body_poses(q[k]))
         X_WC = kinematics.frame_poses(q[k], model.camera_frame)
         X_WE = kinematics.frame_poses(q[k], model.end_effector_frame)
-        plain = (np.linalg.inv(X_WC) @ X_WE, X_WE, X_WC)
-        for one, expected, many in zip(readout.poses(q[k]), plain, batched):
+        # X_CE against Drake's inverse and composition (to rounding); the rest exact
+        X_CE = (RigidTransform(X_WC[0]).inverse() @ RigidTransform(X_WE[0])).GetAsMatrix4()
+        plain = (X_CE[None], X_WE, X_WC)
+        for i, (one, expected, many) in enumerate(zip(readout.poses(q[k]), plain, batched)):
             assert one.shape == (1, 4, 4)
-            np.testing.assert_array_equal(one, expected)
+            np.testing.assert_allclose(one, expected, rtol=0, atol=1e-15 if i == 0 else 0)
             np.testing.assert_array_equal(one[0], many[k])
 
 

@@ -57,8 +57,17 @@ def test_kalman_bank_system_matches_the_bank_through_its_ports(apollo):
     simulator.AdvanceTo(0.045)
     np.testing.assert_allclose(system.GetOutputPort("belief").Eval(context),
                                expected.ravel(), atol=1e-12)
-    X_CE = system.GetOutputPort("X_CE").Eval(context)
-    assert np.all(np.isfinite(X_CE.GetAsMatrix4()))
+    # The three poses (one cached computation) against Drake's forward kinematics.
+    plant = apollo.plant
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositions(plant_context, expected[MEAN_A])
+    world = plant.world_frame()
+    for name, (A, B) in {"X_CE": (apollo.camera_frame, apollo.end_effector_frame),
+                         "X_WE": (world, apollo.end_effector_frame),
+                         "X_WC": (world, apollo.camera_frame)}.items():
+        np.testing.assert_allclose(
+            system.GetOutputPort(name).Eval(context).GetAsMatrix4(),
+            plant.CalcRelativeTransform(plant_context, A, B).GetAsMatrix4(), atol=1e-12)
     np.testing.assert_allclose(system.GetOutputPort("camera_offset").Eval(context),
                                expected[MEAN_A, apollo.virtual_joint_indices], atol=1e-12)
 

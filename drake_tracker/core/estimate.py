@@ -83,8 +83,17 @@ class PoseReadout:
         X_WC = X_WB[:, body] @ X_BC
         body, X_BE = self._frames["E"]
         X_WE = X_WB[:, body] @ X_BE
-        X_CE = np.linalg.inv(X_WC) @ X_WE
-        return X_CE, X_WE, X_WC
+        return rigid_inverse(X_WC) @ X_WE, X_WE, X_WC
+
+
+def rigid_inverse(X: np.ndarray) -> np.ndarray:
+    """The inverses of rigid transforms X (..., 4, 4): [R^T, -R^T p]."""
+    R_T = np.swapaxes(X[..., :3, :3], -1, -2)
+    inverse = np.zeros_like(X)
+    inverse[..., :3, :3] = R_T
+    inverse[..., :3, 3] = -(R_T @ X[..., :3, 3:])[..., 0]
+    inverse[..., 3, 3] = 1.0
+    return inverse
 
 
 def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: float,

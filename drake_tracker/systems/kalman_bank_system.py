@@ -9,7 +9,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import BasicVector, Context, EventStatus, LeafSystem
+from pydrake.systems.framework import (
+    BasicVector,
+    Context,
+    EventStatus,
+    LeafSystem,
+    ValueProducer,
+)
 
 from drake_tracker.core.clock_state import gate_from_vector, gate_to_vector, last_raw_stamp
 from drake_tracker.core.estimate import PoseReadout
@@ -123,6 +129,10 @@ class JointKalmanBankSystem(LeafSystem):
         self.DeclareVectorOutputPort("bias_variance", n,
                                      lambda c, o: self._row(c, o, VAR_B), deps)
         self.DeclareVectorOutputPort("camera_offset", 6, self._calc_offset, deps)
+        # X_CE, X_WE and X_WC, computed together once per belief
+        self._poses = self.DeclareCacheEntry("poses", ValueProducer(
+            allocate=AbstractValue.Make((RigidTransform(),) * 3).Clone,
+            calc=self._calc_poses), deps)
         self.DeclareAbstractOutputPort("X_CE", lambda: AbstractValue.Make(RigidTransform()),
                                        lambda c, o: self._calc_pose(c, o, 0), deps)
         self.DeclareAbstractOutputPort("X_WE", lambda: AbstractValue.Make(RigidTransform()),
@@ -194,6 +204,9 @@ class JointKalmanBankSystem(LeafSystem):
     def _calc_offset(self, context, output: BasicVector):
         output.SetFromVector(self.belief(context)[MEAN_A, self._model.virtual_joint_indices])
 
+    def _calc_poses(self, context, value):
+        value.set_value(tuple(RigidTransform(X[0]) for X in
+                              self._readout.poses(self.belief(context)[MEAN_A])))
+
     def _calc_pose(self, context, output, which: int):
-        X = self._readout.poses(self.belief(context)[MEAN_A])[which][0]
-        output.set_value(RigidTransform(X))
+        output.set_value(self._poses.Eval(context)[which])
