@@ -9,16 +9,14 @@ from pydrake.systems.primitives import VectorLogSink
 
 from drake_tracker.core.camera import CameraIntrinsics
 from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.kalman import MEAN_A, JointKalmanBank
-from drake_tracker.core.pipeline import full_reading, make_bank_and_prior
+from drake_tracker.core.pipeline import make_bank_and_prior
 from drake_tracker.offline import replay_run
-from drake_tracker.params import TrackerParams, resolve_kalman_params
+from drake_tracker.params import TrackerParams
 from drake_tracker.robot import build_tracker_model, robot_preset
 from drake_tracker.synthetic import synthetic_run
 from drake_tracker.systems.add_tracker import AddTracker
 from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
-from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
-from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage
+from drake_tracker.systems.messages import ImageObservationMessage
 from drake_tracker.systems.recorded_run_source import RecordedRunSource
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
@@ -29,64 +27,6 @@ def params(seed: int = 0) -> TrackerParams:
     p.image.num_particles = 40
     p.image.seed = seed
     return p
-
-
-def test_kalman_bank_system_matches_the_bank_through_its_ports(apollo):
-    p = params()
-    system = JointKalmanBankSystem(apollo, p, period_s=0.01)
-    context = system.CreateDefaultContext()
-    n_robot = len(apollo.robot_joint_names)
-    system.GetInputPort("correction").FixValue(context, BeliefCorrection())
-    rng = np.random.default_rng(3)
-    readings = rng.normal(0.0, 0.3, (4, n_robot))
-    bank = JointKalmanBank(resolve_kalman_params(p, apollo.joint_names))
-    _, expected = make_bank_and_prior(apollo, p, readings[0])
-    simulator = Simulator(system, context)
-    last_t = 0.0
-    for k, reading in enumerate(readings):
-        t = 0.01 * k
-        system.GetInputPort("measured_position").FixValue(context, reading)
-        system.GetInputPort("measurement_time").FixValue(context, [t])
-        simulator.AdvanceTo(t + 0.005)
-        expected = bank.step(expected, t - last_t, full_reading(apollo, reading))
-        last_t = t
-        np.testing.assert_allclose(
-            system.GetOutputPort("estimated_position").Eval(context), expected[MEAN_A],
-            rtol=0, atol=1e-12)
-    # The same stamp again is not a new reading.
-    simulator.AdvanceTo(0.045)
-    np.testing.assert_allclose(system.GetOutputPort("belief").Eval(context),
-                               expected.ravel(), atol=1e-12)
-    # The three poses (one cached computation) against Drake's forward kinematics.
-    plant = apollo.plant
-    plant_context = plant.CreateDefaultContext()
-    plant.SetPositions(plant_context, expected[MEAN_A])
-    world = plant.world_frame()
-    for name, (A, B) in {"X_CE": (apollo.camera_frame, apollo.end_effector_frame),
-                         "X_WE": (world, apollo.end_effector_frame),
-                         "X_WC": (world, apollo.camera_frame)}.items():
-        np.testing.assert_allclose(
-            system.GetOutputPort(name).Eval(context).GetAsMatrix4(),
-            plant.CalcRelativeTransform(plant_context, A, B).GetAsMatrix4(), atol=1e-12)
-    np.testing.assert_allclose(system.GetOutputPort("camera_offset").Eval(context),
-                               expected[MEAN_A, apollo.virtual_joint_indices], atol=1e-12)
-
-
-def test_kalman_bank_system_adopts_a_correction_and_skips_nan(apollo):
-    p = params()
-    system = JointKalmanBankSystem(apollo, p, period_s=0.01)
-    context = system.CreateDefaultContext()
-    n = apollo.num_joints
-    corrected = np.zeros((5, n))
-    corrected[MEAN_A] = 0.123
-    corrected[2] = 1e-4
-    system.GetInputPort("correction").FixValue(context, BeliefCorrection(1, 0.0, 0.0, corrected))
-    system.GetInputPort("measured_position").FixValue(
-        context, np.full(len(apollo.robot_joint_names), np.nan))
-    system.GetInputPort("measurement_time").FixValue(context, [0.0])
-    Simulator(system, context).AdvanceTo(0.005)
-    np.testing.assert_array_equal(system.GetOutputPort("estimated_position").Eval(context),
-                                  corrected[MEAN_A])
 
 
 def test_delay_buffer_system_reports_why_an_image_has_no_prior(apollo):
