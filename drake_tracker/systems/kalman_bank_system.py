@@ -44,6 +44,11 @@ class KalmanBankState:
     last_reading_s: float | None = None
     correction_id: int = 0
 
+    #: Where the vector holds the correction's id, and where the gate's numbers begin
+    #: (after time_s and last_reading_s).
+    CORRECTION_ID = 2
+    GATE = slice(3, None)
+
     def to_vector(self) -> np.ndarray:
         """The numbers of the discrete state group (NaN for None)."""
         head = [np.nan if v is None else v for v in (self.time_s, self.last_reading_s)]
@@ -53,9 +58,9 @@ class KalmanBankState:
     def from_vector(x: np.ndarray, params: TrackerParams,
                     joint_names: list[str]) -> KalmanBankState:
         """The state that :meth:`to_vector` gave ``x``."""
-        time_s, last_reading_s, correction_id = x[:3].tolist()
+        time_s, last_reading_s, correction_id = x[:KalmanBankState.GATE.start].tolist()
         return KalmanBankState(
-            gate_from_vector(x[3:], params.timestamps, joint_names),
+            gate_from_vector(x[KalmanBankState.GATE], params.timestamps, joint_names),
             None if np.isnan(time_s) else time_s,
             None if np.isnan(last_reading_s) else last_reading_s, int(correction_id))
 
@@ -157,10 +162,11 @@ class JointKalmanBankSystem(LeafSystem):
     def _update(self, context, discrete_state) -> EventStatus | None:
         x = context.get_discrete_state(self._bookkeeping).get_value()
         correction = self._correction_port.Eval(context)
-        adopt = correction.id > int(x[2]) and correction.belief is not None
+        adopt = (correction.id > int(x[KalmanBankState.CORRECTION_ID])
+                 and correction.belief is not None)
         raw = float(self._time_port.Eval(context)[0])
         new_reading = (self._params.use_joint_readings
-                       and is_new_stamp(raw, last_raw_stamp(x[3:])))
+                       and is_new_stamp(raw, last_raw_stamp(x[KalmanBankState.GATE])))
         if not (adopt or new_reading):
             return EventStatus.DidNothing()  # Drake keeps the state as it is
         belief = self.belief(context).copy()
