@@ -21,6 +21,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
+from drake_tracker.kernel_warm_up import warm_up_tracker_kernels
 from drake_tracker.params import TrackerParams
 from drake_tracker.progress import SimulatedSecondsBar
 from drake_tracker.servo.config import FEEDBACK_LABELS, ServoStudyConfig
@@ -128,6 +129,13 @@ def run_servo(config: ServoStudyConfig, feedback: str, scenario: Scenario | None
     """Builds the ``feedback`` run's Diagram, simulates it for ``duration_s`` (default:
     ``config.duration_s``) and returns the sampled run."""
     built = build_servo_diagram(config, feedback, scenario, params, visualize)
+    if built.tracker is not None:  # compile or load its kernels before the clock starts
+        processor = built.tracker.image_update.processor
+        seconds = warm_up_tracker_kernels(built.tracker.model, processor.update.camera,
+                                          processor.params)
+        if progress:
+            print(f"the tracker's kernels loaded in {seconds:.1f} s (a machine's first run "
+                  f"compiles them)", flush=True)
     duration = config.duration_s if duration_s is None else float(duration_s)
     simulator = Simulator(built.diagram)
     root = simulator.get_mutable_context()
