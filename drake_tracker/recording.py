@@ -73,7 +73,8 @@ class RecordedRun:
             k = int(np.flatnonzero(~(np.diff(self.reading_times_s) > 0))[0]) + 1
             raise ValueError(
                 f"reading_times_s must be strictly increasing and finite: reading {k} is "
-                f"stamped {self.reading_times_s[k]!r} s after {self.reading_times_s[k - 1]!r} s "
+                f"stamped {float(self.reading_times_s[k])!r} s after "
+                f"{float(self.reading_times_s[k - 1])!r} s "
                 f"(a recorded log is replayed in stamp order; the live Tracker skips such "
                 f"a reading with a warning)")
         num_images = len(self.image_capture_times_s)

@@ -83,8 +83,9 @@ def test_a_recording_with_a_glitched_reading_stamp_names_the_reading(run, glitch
     stamps = run.reading_times_s.copy()
     stamps[7] = stamps[6] if glitch == "repeat" else stamps[7] + glitch
     k = 8 if glitch == 1000.0 else 7  # a glitch forward shows at the next reading
-    with pytest.raises(ValueError, match=rf"strictly increasing and finite: reading {k} "):
+    with pytest.raises(ValueError, match=rf"strictly increasing and finite: reading {k} ") as err:
         dataclasses.replace(run, reading_times_s=stamps)
+    assert f"stamped {float(stamps[k])!r} s after {float(stamps[k - 1])!r} s" in str(err.value)
 
 
 def test_sixteen_bit_millimetre_images_are_read_as_metres(apollo, run):
