@@ -35,9 +35,9 @@ from drake_tracker.core.pipeline import (
     new_belief_buffer,
     robot_joint_indices,
 )
+from drake_tracker.core.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.reading_gate import ReadingGate
 from drake_tracker.core.timestamps import (
-    RateLimitedWarning,
-    ReadingGate,
     StreamClock,
     follow_buffer,
     log_reanchor,

@@ -308,7 +308,7 @@ def test_a_copied_gate_is_independent_and_shares_only_what_never_changes(how):
     other's later samples."""
     import copy
 
-    from drake_tracker.core.timestamps import ReadingGate
+    from drake_tracker.core.reading_gate import ReadingGate
 
     gate = ReadingGate(TimestampParams(), ["a", "b"])
     for k in range(20):

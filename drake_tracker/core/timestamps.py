@@ -21,14 +21,13 @@ re-anchoring one are lost. (Taking every re-anchored clock to continue where it 
 a camera whose clock did not step aligned with encoders whose clock did.)
 
 :class:`RateLimitedWarning` (``core/rate_limited_warning.py``) logs each kind of problem
-at its 1st, 10th, 100th, ... occurrence, with the count; :class:`ReadingGate` adds the
-joint values' check: a run of non-finite readings (an encoder gap) gets one warning when
-it starts and one info line when it ends.
+at its 1st, 10th, 100th, ... occurrence, with the count; the joint readings' gate
+(``core/reading_gate.py``) adds the values' check: a run of non-finite readings (an
+encoder gap) gets one warning when it starts and one info line when it ends.
 """
 
 from __future__ import annotations
 
-import copy
 import logging
 import math
 from collections import deque
@@ -38,7 +37,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.core.rate_limited_warning import RateLimitedWarning
 from drake_tracker.params import TimestampParams
 
 if TYPE_CHECKING:
@@ -120,6 +118,39 @@ class StreamClock:
 
     def __deepcopy__(self, memo) -> StreamClock:
         return self.copy()
+
+    #: Numbers in :meth:`to_vector`: the scalars below, then the recent gaps and the
+    #: recent lags, each as a count followed by RECENT_GAPS slots.
+    _SCALARS = ("offset_s", "last_shift_s", "latest_s", "_accepted", "_run_count",
+                "_run_first_raw", "_run_last_raw", "_lag_run_count", "_lag_run_first")
+    VECTOR_SIZE = len(_SCALARS) + 2 * (1 + RECENT_GAPS)
+
+    def to_vector(self) -> np.ndarray:
+        """The clock's state as VECTOR_SIZE numbers (NaN for a latest stamp of None), for
+        a Drake discrete state; :meth:`restore` reads them back."""
+        numbers = [math.nan if getattr(self, k) is None else float(getattr(self, k))
+                   for k in self._SCALARS]
+        for history in (self._gaps, self._lags):
+            numbers += [len(history), *history] + [math.nan] * (RECENT_GAPS - len(history))
+        return np.array(numbers)
+
+    def restore(self, vector: np.ndarray) -> None:
+        """Takes the state that :meth:`to_vector` gave ``vector`` (name, parameters and
+        ``max_behind_s`` stay this clock's)."""
+        values = np.asarray(vector, dtype=float).tolist()
+        if len(values) != self.VECTOR_SIZE:
+            raise ValueError(f"a {self.name} clock's state has {self.VECTOR_SIZE} numbers, "
+                             f"got {len(values)}")
+        for key, value in zip(self._SCALARS, values, strict=False):
+            setattr(self, key, int(value) if key in ("_accepted", "_run_count",
+                                                     "_lag_run_count") else value)
+        if math.isnan(self.latest_s):
+            self.latest_s = None
+        at = len(self._SCALARS)
+        for history in (self._gaps, self._lags):
+            history.clear()
+            history.extend(values[at + 1:at + 1 + int(values[at])])
+            at += 1 + RECENT_GAPS
 
     @property
     def recent_period_s(self) -> float:
@@ -241,95 +272,6 @@ class StreamClock:
         shift = new_offset - self.offset_s
         self.offset_s, self.last_shift_s = new_offset, shift
         return self._accept(raw, reanchored_by=shift)
-
-
-#: A reading value beyond this (rad, or m) is skipped like a non-finite one: squared in
-#: the filter and the CPF, it would overflow (1e300 did, at the next image).
-MAX_READING_MAGNITUDE = 1e6
-
-
-def is_new_stamp(raw_s: float, last_raw_s: float) -> bool:
-    """Whether a stamp held on a port is a new sample: it differs from the last one seen
-    (NaN after NaN is the same sample)."""
-    raw, last = float(raw_s), float(last_raw_s)
-    return not (raw == last or (math.isnan(raw) and math.isnan(last)))
-
-
-class ReadingGate:
-    """The joint readings' policy: new-sample detection, the stamp's :class:`StreamClock`,
-    and one warning per run of non-finite values (an encoder gap).
-
-    ``admit`` returns the reading's time in the tracker's time base, or None when it is
-    skipped (logged through ``warnings``; ``logger=None`` keeps it quiet, for a second
-    consumer of the same stream that must take the same decisions).
-    """
-
-    def __init__(self, params: TimestampParams, joint_names: list[str],
-                 logger: logging.Logger | None = _log):
-        self.clock = StreamClock("joint reading", params)
-        self.joint_names = list(joint_names)
-        self.warnings = RateLimitedWarning(logger or _log, enabled=logger is not None)
-        self.logger = logger
-        self.last_raw_s = float("nan")
-        self.gap_start_s: float | None = None
-        self.gap_readings = 0
-        #: Whether the latest admitted reading restarted the time base
-        #: (``StampDecision.restarted``): the caller restarts its belief from it.
-        self.restarted = False
-
-    def copy(self) -> ReadingGate:
-        """An independent copy that shares the logger and joint names (see StreamClock's)."""
-        return self._with(self.clock.copy(), self.warnings.copy())
-
-    def __deepcopy__(self, memo) -> ReadingGate:
-        return self._with(copy.deepcopy(self.clock, memo), copy.deepcopy(self.warnings, memo))
-
-    def _with(self, clock: StreamClock, warnings: RateLimitedWarning) -> ReadingGate:
-        clone = object.__new__(ReadingGate)
-        clone.__dict__.update(self.__dict__)
-        clone.clock, clone.warnings = clock, warnings
-        return clone
-
-    def is_new(self, raw_s: float) -> bool:
-        """Whether a stamp held on a port is a new sample (differs from the last seen)."""
-        return is_new_stamp(raw_s, self.last_raw_s)
-
-    def admit(self, raw_s: float, values: np.ndarray) -> float | None:
-        """The reading's time in the tracker's time base, or None (skipped, logged)."""
-        self.last_raw_s = float(raw_s)
-        self.restarted = False
-        # NaN, ±inf, absurd values: a plain loop over the few joints is the fast check.
-        if not all(abs(v) <= MAX_READING_MAGNITUDE for v in np.ravel(values).tolist()):
-            with np.errstate(invalid="ignore"):
-                bad = ~(np.abs(values) <= MAX_READING_MAGNITUDE)
-            if self.gap_start_s is None:
-                self.gap_start_s = float(raw_s)
-                names = [n for n, b in zip(self.joint_names, bad, strict=True) if b]
-                if self.logger:
-                    self.logger.warning(
-                        "joint reading stamped %.4f s is not finite (%s; or beyond "
-                        "±1e6, which overflows the filter): readings are skipped until "
-                        "they are finite again (one warning per gap)",
-                        raw_s, ", ".join(names))
-            self.gap_readings += 1
-            return None
-        decision = self.clock.check(raw_s)
-        if decision.time_s is None:
-            self.warnings.warn(decision.kind, f"joint reading skipped: {decision.problem}")
-            return None
-        self.restarted = decision.restarted
-        if decision.restarted and self.logger:
-            self.logger.warning("joint reading clock restarted at %.4f s: the few stamps "
-                                "accepted before were not followed by the stream; the "
-                                "estimate restarts from this reading", raw_s)
-        if self.gap_start_s is not None:
-            if self.logger:
-                self.logger.info("joint readings finite again at %.4f s after %d skipped "
-                                 "from %.4f s", raw_s, self.gap_readings, self.gap_start_s)
-            self.gap_start_s, self.gap_readings = None, 0
-        if decision.reanchored_by_s is not None and self.logger:
-            log_reanchor(self.logger, "joint reading", decision, raw_s, self.clock)
-        return decision.time_s
 
 
 def log_reanchor(logger: logging.Logger, name: str, decision: StampDecision, raw_s: float,

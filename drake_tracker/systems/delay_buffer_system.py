@@ -19,8 +19,8 @@ from drake_tracker.core.pipeline import (
     new_belief_buffer,
     robot_joint_indices,
 )
+from drake_tracker.core.reading_gate import ReadingGate
 from drake_tracker.core.timestamps import (
-    ReadingGate,
     StampDecision,
     StreamClock,
     follow_buffer,

@@ -17,11 +17,10 @@ from pydrake.systems.framework import (
     ValueProducer,
 )
 
-from drake_tracker.core.clock_state import gate_from_vector, gate_to_vector, last_raw_stamp
 from drake_tracker.core.estimate import PoseReadout
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
 from drake_tracker.core.pipeline import full_reading, make_bank_and_prior, robot_joint_indices
-from drake_tracker.core.timestamps import ReadingGate, is_new_stamp
+from drake_tracker.core.reading_gate import ReadingGate, is_new_stamp
 from drake_tracker.params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
 
@@ -52,7 +51,7 @@ class KalmanBankState:
     def to_vector(self) -> np.ndarray:
         """The numbers of the discrete state group (NaN for None)."""
         head = [np.nan if v is None else v for v in (self.time_s, self.last_reading_s)]
-        return np.concatenate([head, [self.correction_id], gate_to_vector(self.gate)])
+        return np.concatenate([head, [self.correction_id], self.gate.to_vector()])
 
     @staticmethod
     def from_vector(x: np.ndarray, params: TrackerParams,
@@ -60,7 +59,7 @@ class KalmanBankState:
         """The state that :meth:`to_vector` gave ``x``."""
         time_s, last_reading_s, correction_id = x[:KalmanBankState.GATE.start].tolist()
         return KalmanBankState(
-            gate_from_vector(x[KalmanBankState.GATE], params.timestamps, joint_names),
+            ReadingGate.from_vector(x[KalmanBankState.GATE], params.timestamps, joint_names),
             None if np.isnan(time_s) else time_s,
             None if np.isnan(last_reading_s) else last_reading_s, int(correction_id))
 
@@ -100,7 +99,7 @@ class JointKalmanBankSystem(LeafSystem):
 
     Discrete state: ``belief``, the (5, n) moments, row-major (:meth:`belief`), and
     ``bookkeeping``, a :class:`KalmanBankState` as numbers (:meth:`bookkeeping`; the
-    gate's through ``core/clock_state.py``). Readings the delay buffer skips are
+    gate's through :meth:`ReadingGate.to_vector`). Readings the delay buffer skips are
     skipped here too (the buffer logs them).
     """
 
@@ -166,7 +165,7 @@ class JointKalmanBankSystem(LeafSystem):
                  and correction.belief is not None)
         raw = float(self._time_port.Eval(context)[0])
         new_reading = (self._params.use_joint_readings
-                       and is_new_stamp(raw, last_raw_stamp(x[KalmanBankState.GATE])))
+                       and is_new_stamp(raw, ReadingGate.last_raw_stamp(x[KalmanBankState.GATE])))
         if not (adopt or new_reading):
             return EventStatus.DidNothing()  # Drake keeps the state as it is
         belief = self.belief(context).copy()

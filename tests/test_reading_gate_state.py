@@ -1,12 +1,12 @@
-"""The reading gate as numbers (core/clock_state.py): a gate rebuilt from its vector at
-every reading takes the decisions of a gate that lives on, on awkward streams."""
+"""The reading gate as numbers (``ReadingGate.to_vector``/``from_vector``, for the Kalman
+bank system's discrete state): a gate rebuilt from its vector at every reading takes the
+decisions of a gate that lives on, on awkward streams."""
 
 import numpy as np
 import pytest
 from awkward_stamps import awkward_stamps
 
-from drake_tracker.core.clock_state import GATE_VECTOR_SIZE, gate_from_vector, gate_to_vector
-from drake_tracker.core.timestamps import ReadingGate
+from drake_tracker.core.reading_gate import ReadingGate
 from drake_tracker.params import TimestampParams
 
 JOINTS = ["a", "b"]
@@ -30,10 +30,10 @@ def test_a_gate_rebuilt_from_its_vector_decides_as_the_original(seed):
     stamps = [1e6] + awkward_stamps(seed, 4000)
     values = _readings(seed, len(stamps))
     living = ReadingGate(params, JOINTS, logger=None)
-    vector = gate_to_vector(ReadingGate(params, JOINTS, logger=None))
+    vector = ReadingGate(params, JOINTS, logger=None).to_vector()
     seen = {"restarted": 0, "gap": 0, "accepted": 0, "new": 0}
     for raw, reading in zip(stamps, values, strict=True):
-        rebuilt = gate_from_vector(vector, params, JOINTS)
+        rebuilt = ReadingGate.from_vector(vector, params, JOINTS)
         assert rebuilt.is_new(raw) == living.is_new(raw)
         if living.is_new(raw):
             seen["new"] += 1
@@ -44,14 +44,14 @@ def test_a_gate_rebuilt_from_its_vector_decides_as_the_original(seed):
             seen["restarted"] += living.restarted
             seen["accepted"] += t_living is not None
         seen["gap"] += living.gap_start_s is not None
-        vector = gate_to_vector(rebuilt)
-        np.testing.assert_array_equal(vector, gate_to_vector(living))
-        assert vector.shape == (GATE_VECTOR_SIZE,)
+        vector = rebuilt.to_vector()
+        np.testing.assert_array_equal(vector, living.to_vector())
+        assert vector.shape == (ReadingGate.VECTOR_SIZE,)
     # the streams did go through every branch
     assert seen["restarted"] >= 1 and seen["gap"] >= 12
     assert 0 < seen["accepted"] < seen["new"] < len(stamps)
 
 
 def test_a_vector_of_the_wrong_size_is_an_error():
-    with pytest.raises(ValueError, match="reading gate's vector"):
-        gate_from_vector(np.zeros(3), TimestampParams(), JOINTS)
+    with pytest.raises(ValueError, match="reading gate's state has"):
+        ReadingGate.from_vector(np.zeros(3), TimestampParams(), JOINTS)
