@@ -119,20 +119,22 @@ class StreamClock:
     def __deepcopy__(self, memo) -> StreamClock:
         return self.copy()
 
-    #: Numbers in :meth:`to_vector`: the scalars below, then the recent gaps and the
-    #: recent lags, each as a count followed by RECENT_GAPS slots.
-    _SCALARS = ("offset_s", "last_shift_s", "latest_s", "_accepted", "_run_count",
-                "_run_first_raw", "_run_last_raw", "_lag_run_count", "_lag_run_first")
-    VECTOR_SIZE = len(_SCALARS) + 2 * (1 + RECENT_GAPS)
+    #: Numbers in :meth:`to_vector`: 9 scalars (offset, last shift, latest stamp,
+    #: accepted count, the run of rejected stamps: count, first, last; the run of lags:
+    #: count, first), then the recent gaps and the recent lags, each as a count followed
+    #: by RECENT_GAPS slots.
+    VECTOR_SIZE = 9 + 2 * (1 + RECENT_GAPS)
 
     def to_vector(self) -> np.ndarray:
         """The clock's state as VECTOR_SIZE numbers (NaN for a latest stamp of None), for
         a Drake discrete state; :meth:`restore` reads them back."""
-        numbers = [math.nan if getattr(self, k) is None else float(getattr(self, k))
-                   for k in self._SCALARS]
+        numbers = [self.offset_s, self.last_shift_s,
+                   math.nan if self.latest_s is None else self.latest_s, self._accepted,
+                   self._run_count, self._run_first_raw, self._run_last_raw,
+                   self._lag_run_count, self._lag_run_first]
         for history in (self._gaps, self._lags):
             numbers += [len(history), *history] + [math.nan] * (RECENT_GAPS - len(history))
-        return np.array(numbers)
+        return np.array(numbers, dtype=float)
 
     def restore(self, vector: np.ndarray) -> None:
         """Takes the state that :meth:`to_vector` gave ``vector`` (name, parameters and
@@ -141,12 +143,12 @@ class StreamClock:
         if len(values) != self.VECTOR_SIZE:
             raise ValueError(f"a {self.name} clock's state has {self.VECTOR_SIZE} numbers, "
                              f"got {len(values)}")
-        for key, value in zip(self._SCALARS, values, strict=False):
-            setattr(self, key, int(value) if key in ("_accepted", "_run_count",
-                                                     "_lag_run_count") else value)
-        if math.isnan(self.latest_s):
-            self.latest_s = None
-        at = len(self._SCALARS)
+        (self.offset_s, self.last_shift_s, latest, accepted, run_count, self._run_first_raw,
+         self._run_last_raw, lag_run_count, self._lag_run_first) = values[:9]
+        self.latest_s = None if math.isnan(latest) else latest
+        self._accepted, self._run_count = int(accepted), int(run_count)
+        self._lag_run_count = int(lag_run_count)
+        at = 9
         for history in (self._gaps, self._lags):
             history.clear()
             history.extend(values[at + 1:at + 1 + int(values[at])])
