@@ -79,6 +79,9 @@ def main() -> None:
                         default=Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix"
                         / "share" / "example-robot-data")
     args = parser.parse_args()
+    if not args.share.is_dir():
+        parser.error(f"example-robot-data's share folder {args.share} does not exist: "
+                     f"pip install example-robot-data, or pass --share DIR")
     config = panda_config(args.share)
     print(yaml_dump_typed(config))
     render_agreement(config)
