@@ -15,7 +15,7 @@ import numpy as np
 
 from drake_tracker.core.health import TrackerHealth
 from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.kinematics import BatchedKinematics, relative_poses_one
+from drake_tracker.core.kinematics import BatchedKinematics, relative_poses_one, rigid_inverse
 
 if TYPE_CHECKING:
     from drake_tracker.robot import TrackerModel
@@ -84,16 +84,6 @@ class PoseReadout:
         body, X_BE = self._frames["E"]
         X_WE = X_WB[:, body] @ X_BE
         return rigid_inverse(X_WC) @ X_WE, X_WE, X_WC
-
-
-def rigid_inverse(X: np.ndarray) -> np.ndarray:
-    """The inverses of rigid transforms X (..., 4, 4): [R^T, -R^T p]."""
-    R_T = np.swapaxes(X[..., :3, :3], -1, -2)
-    inverse = np.zeros_like(X)
-    inverse[..., :3, :3] = R_T
-    inverse[..., :3, 3] = -(R_T @ X[..., :3, 3:])[..., 0]
-    inverse[..., 3, 3] = 1.0
-    return inverse
 
 
 def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: float,

@@ -52,7 +52,7 @@ def _to4(X) -> np.ndarray:
     return np.asarray(X.GetAsMatrix4(), dtype=float)
 
 
-def _inv4(X: np.ndarray) -> np.ndarray:
+def rigid_inverse(X: np.ndarray) -> np.ndarray:
     """Inverse of rigid transform(s) ``(..., 4, 4)``."""
     R = X[..., :3, :3]
     p = X[..., :3, 3]
@@ -271,7 +271,7 @@ class BatchedKinematics:
     def _make_step(joint, reversed_: bool) -> _JointStep:
         kind = _SUPPORTED[joint.type_name()]
         A = _to4(joint.frame_on_parent().GetFixedPoseInBodyFrame())  # X_PF
-        B = _inv4(_to4(joint.frame_on_child().GetFixedPoseInBodyFrame()))  # X_MC
+        B = rigid_inverse(_to4(joint.frame_on_child().GetFixedPoseInBodyFrame()))  # X_MC
         axis = np.zeros(3)
         X_FM = np.eye(4)
         q_index = -1
@@ -287,7 +287,8 @@ class BatchedKinematics:
         p = int(joint.parent_body().index())
         c = int(joint.child_body().index())
         if reversed_:
-            return _JointStep(kind, c, p, q_index, axis, _inv4(B), _inv4(A), _inv4(X_FM), True)
+            return _JointStep(kind, c, p, q_index, axis, rigid_inverse(B), rigid_inverse(A),
+                              rigid_inverse(X_FM), True)
         return _JointStep(kind, p, c, q_index, axis, A, B, X_FM, False)
 
     @property
