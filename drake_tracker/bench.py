@@ -13,7 +13,9 @@ Keys of ``bench.json``:
   figures of :mod:`drake_tracker.bench_likelihood`: image updates/s at about 2000
   evaluations with 1 and 2 numba threads, µs per evaluation by stage, the CPF's Python
   time per block call, Drake RenderEngineVtk's time per image and its ratios, agreement
-  with it, triangle counts;
+  with it, triangle counts, and ``level_of_detail`` (the measured level of detail's
+  agreement on its calibration images and each body's cell; None where nothing is
+  simplified);
 * ``image_updates_per_s_2000_1_thread`` / ``..._2_threads``: the bench robot's;
 * ``cad_over_bench_cost_per_evaluation``: the scoring kernel's time per evaluation, CAD
   robot / bench robot, the two robots' updates taking turns (``kernel_us_per_evaluation``

@@ -188,7 +188,20 @@ def bench_robot(model: TrackerModel, camera: CameraIntrinsics, params: TrackerPa
         "depth_p95_mm_vs_drake": drake["depth_p95_mm"],
         "triangles_source": renderer.source_meshes.num_triangles,
         "triangles_rendered": renderer.num_triangles,
+        "level_of_detail": _detail_summary(renderer),
     }
+
+
+def _detail_summary(renderer) -> dict | None:
+    """The measured level of detail's calibration figures and per-body choices (None:
+    the meshes are rendered at one cell, or as they are)."""
+    measured = getattr(renderer, "measured_detail", None)
+    if measured is None:
+        return None
+    return {"calibration_agreement": measured.agreement,
+            "calibration_robot_px": measured.robot_px,
+            "bodies": [{"body": int(o.body), "cell_px": o.cell_px, "culled": o.culled,
+                        "triangles": o.triangles} for o in measured.options]}
 
 
 def _full_resolution(image: np.ndarray, stride: int) -> np.ndarray:

@@ -11,7 +11,8 @@ camera on the base (``panda_link0``) and uses the URDF's ``panda_hand_tcp`` as t
 effector. On the first load the meshes are converted to OBJ into the mesh cache.
 
 The example prints the config as YAML (what a config file holds), checks the batched
-renderer against Drake's RenderEngineVtk at the home pose the joint limits give, and
+renderer against Drake's RenderEngineVtk about the home pose the joint limits give,
+times its likelihood against the bench robot's (``--no-track``: only these), and
 tracks the Panda with 8.6 deg encoder biases in the Diagram of
 ``track_in_your_diagram.py`` (a stock RgbdSensor, 2 cm / 2 deg off its nominal pose).
 """
@@ -33,7 +34,7 @@ from drake_tracker import (
     default_home_positions,
 )
 from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.renderer import make_renderer
+from drake_tracker.core.renderer import make_renderer, random_configurations
 
 PANDA_URDF = "package://example-robot-data/robots/panda_description/urdf/panda.urdf"
 PANDA_ARM = [f"panda_joint{k}" for k in range(1, 8)]
@@ -51,30 +52,53 @@ def panda_config(share: Path) -> RobotConfig:
 
 
 def render_agreement(config: RobotConfig) -> None:
-    """Batched renderer against RenderEngineVtk at the home pose, 80x60."""
+    """The batched renderer (its level of detail, measured for this robot and image
+    size) against RenderEngineVtk on the full meshes, at 12 configurations about the
+    home pose (spread 0.3 rad) that the level of detail was not measured on."""
     model = build_tracker_model(config)
-    q = np.zeros((1, model.num_joints))
-    q[0, :len(model.robot_joint_names)] = default_home_positions(
+    center = np.zeros(model.num_joints)
+    center[:len(model.robot_joint_names)] = default_home_positions(
         model.plant, model.robot_joint_names)
-    intrinsics = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
-    batched = make_renderer(model, intrinsics, "batched")
-    batched.render(q)  # compiles
-    start = time.perf_counter()
-    ours = batched.render(np.repeat(q, 20, axis=0))[0]
-    per_image_us = 1e6 * (time.perf_counter() - start) / 20
-    drake = make_renderer(model, intrinsics, "drake").render(q)[0]
-    hit_ours, hit_drake = np.isfinite(ours), np.isfinite(drake)
-    both = hit_ours & hit_drake
-    print(f"robot pixels: batched {hit_ours.sum()}, Drake {hit_drake.sum()}; agreement "
-          f"{both.sum() / (hit_ours | hit_drake).sum():.4f}; median depth difference "
-          f"{1000 * np.median(np.abs(ours[both] - drake[both])):.2f} mm; "
-          f"batched {per_image_us:.0f} us per image")
+    q = random_configurations(model, 12, seed=3, center=center)
+    for width in (80, 160):
+        intrinsics = CameraIntrinsics.from_fov(width, width * 3 // 4, np.radians(45.0))
+        start = time.perf_counter()
+        batched = make_renderer(model, intrinsics, "batched")
+        build_s = time.perf_counter() - start
+        ours = batched.render(q)
+        drake = make_renderer(model, intrinsics, "drake").render(q)
+        hit_ours, hit_drake = np.isfinite(ours), np.isfinite(drake)
+        per_image = [(a & b).sum() / max(1, (a | b).sum()) for a, b in zip(hit_ours, hit_drake)]
+        both = hit_ours & hit_drake
+        depth_mm = 1000 * np.abs(ours[both] - drake[both])
+        print(f"{width}x{width * 3 // 4}: {batched.num_triangles} of "
+              f"{batched.source_meshes.num_triangles} triangles (built in {build_s:.1f} s); "
+              f"labels {1 - (hit_ours ^ hit_drake).sum() / (hit_ours | hit_drake).sum():.4f} "
+              f"(worst image {min(per_image):.4f}, median {np.median(per_image):.4f}); "
+              f"depth median {np.median(depth_mm):.2f} mm, p95 "
+              f"{np.percentile(depth_mm, 95):.2f} mm")
+
+
+def cost_against_apollo(config: RobotConfig) -> None:
+    """µs per likelihood evaluation in the image update, this robot's and the bench
+    robot's, timed in turns as ``drake-tracker bench`` does (1 thread)."""
+    from drake_tracker.bench_likelihood import kernel_us_per_evaluation_in_turns
+    from drake_tracker.robot import robot_preset
+
+    models = {"apollo": build_tracker_model(robot_preset("apollo")),
+              "this robot": build_tracker_model(config)}
+    camera = CameraIntrinsics.from_fov(640, 480, np.radians(45.0))
+    us = kernel_us_per_evaluation_in_turns(models, camera, TrackerParams(), repeats=10)
+    print(f"us per evaluation: this robot {us['this robot']:.1f}, the bench robot "
+          f"{us['apollo']:.1f}: {us['this robot'] / us['apollo']:.2f}x")
 
 
 def main() -> None:
     """Loads the Panda, compares the renderers, tracks it."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=2.0)
+    parser.add_argument("--no-track", action="store_true",
+                        help="only compare the renderers and time the likelihood")
     parser.add_argument("--share", type=Path, help="example-robot-data's share folder",
                         default=Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix"
                         / "share" / "example-robot-data")
@@ -85,6 +109,9 @@ def main() -> None:
     config = panda_config(args.share)
     print(yaml_dump_typed(config))
     render_agreement(config)
+    cost_against_apollo(config)
+    if args.no_track:
+        return
 
     model = build_tracker_model(config)
     home = default_home_positions(model.plant, model.robot_joint_names)

@@ -21,6 +21,10 @@ def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):
     bench, cad = result["robots"]["apollo"], result["robots"]["apollo_cad"]
     assert 2000 <= bench["evaluations"] <= 2100 and cad["evaluations"] == bench["evaluations"]
     assert cad["triangles_source"] >= 40_000 > cad["triangles_rendered"]
+    assert bench["level_of_detail"] is None  # primitives: nothing to simplify
+    detail = cad["level_of_detail"]  # measured for this robot and image size
+    assert detail["calibration_agreement"] >= 0.99
+    assert sum(b["triangles"] for b in detail["bodies"]) == cad["triangles_rendered"]
     for robot in (bench, cad):  # the agreement with RenderEngineVtk
         assert robot["label_agreement_vs_drake"] >= 0.99
         assert robot["depth_median_mm_vs_drake"] <= 2.0

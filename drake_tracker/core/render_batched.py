@@ -20,6 +20,7 @@ and pixels with no hit, or whose nearest hit is beyond ``far_m``, are ``inf``.
 
 from __future__ import annotations
 
+import warnings
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,6 +31,7 @@ from drake_tracker.core.kinematics import BatchedKinematics
 from drake_tracker.core.lane_render import lane_tables
 from drake_tracker.core.level_of_detail import LevelOfDetail, level_of_detail
 from drake_tracker.core.likelihood import PreparedObservation
+from drake_tracker.core.measured_detail import MeasuredDetail, measure_detail
 from drake_tracker.core.mesh_parts import render_tables
 from drake_tracker.core.numba_threading import SerialOrParallel
 from drake_tracker.core.rasterize import frustum_planes, num_chunks, render_kernel
@@ -38,12 +40,17 @@ from drake_tracker.core.render_likelihood import (
     kernel_workspace,
     num_batch_chunks,
 )
+from drake_tracker.core.renderer import default_view_configuration, random_configurations
 
 if TYPE_CHECKING:
     from drake_tracker.robot import TrackerModel
 
 #: The level of detail the renderer uses unless told otherwise.
 DEFAULT_DETAIL = LevelOfDetail()
+
+#: A measured level of detail needs its calibration images to show at least this many
+#: robot pixels in all.
+MIN_CALIBRATION_PX = 200
 
 
 class BatchedDepthRenderer:
@@ -56,12 +63,16 @@ class BatchedDepthRenderer:
     def __init__(self, model: TrackerModel, intrinsics: CameraIntrinsics, near_m: float = 0.1,
                  far_m: float = 6.0, segments: int = DEFAULT_SEGMENTS,
                  pixel_center_offset: float = 0.5,
-                 detail: LevelOfDetail | None = DEFAULT_DETAIL) -> None:
+                 detail: LevelOfDetail | None = DEFAULT_DETAIL,
+                 detail_configurations: np.ndarray | None = None) -> None:
         """``pixel_center_offset``: pixel (i, j) samples u = i + offset, v = j + offset.
         0.5 reproduces Drake's RenderEngineVtk images; 0.0 is the integer-centre reading.
         ``segments``: tessellation of curved shapes (see ``geometry``). ``detail``: the
         meshes are simplified to this level of detail for this image size (see
-        ``level_of_detail``); None renders the meshes as they are.
+        ``level_of_detail``); None renders the meshes as they are. A measured level of
+        detail is measured on the images of ``detail_configurations`` (N, nq), by default
+        ``detail.calibration_images`` configurations about the view configuration
+        (``renderer.random_configurations``); ``measured_detail`` keeps the measurement.
         ``source_meshes`` keeps the meshes as read, ``meshes`` what is rendered."""
         if not (0.0 < near_m < far_m):
             raise ValueError(f"need 0 < near_m < far_m, got near {near_m}, far {far_m}")
@@ -73,15 +84,6 @@ class BatchedDepthRenderer:
         self.kinematics = BatchedKinematics.from_plant(model.plant)
         self.source_meshes: RobotMeshes = extract_robot_meshes(model.plant, model.scene_graph,
                                                                segments)
-        self.meshes = self.source_meshes
-        if detail is not None:
-            self.meshes = level_of_detail(self.source_meshes, detail.cell_m(intrinsics),
-                                          detail.min_reduction)
-        self._tables = render_tables(self.meshes, self.kinematics.num_bodies)
-        self._lane_tables = lane_tables(self._tables)
-        self._frame_tables = self.kinematics.frame_tables(model.camera_frame)
-        self._policy = SerialOrParallel()
-        self._workspace: tuple | None = None
         k = intrinsics
         self._fx = float(k.fx)
         self._fy = float(k.fy)
@@ -89,6 +91,43 @@ class BatchedDepthRenderer:
         self._cy = float(k.cy) - self.pixel_center_offset
         self._planes = frustum_planes(self._fx, self._fy, self._cx, self._cy,
                                        k.width, k.height)
+        self.measured_detail: MeasuredDetail | None = None
+        self.meshes = self._detailed_meshes(detail, detail_configurations)
+        self._tables = render_tables(self.meshes, self.kinematics.num_bodies)
+        self._lane_tables = lane_tables(self._tables)
+        self._frame_tables = self.kinematics.frame_tables(model.camera_frame)
+        self._policy = SerialOrParallel()
+        self._workspace: tuple | None = None
+
+    def _detailed_meshes(self, detail: LevelOfDetail | None,
+                         configurations: np.ndarray | None) -> RobotMeshes:
+        """The meshes rendered at ``detail`` (see ``__init__``)."""
+        if detail is None:
+            return self.source_meshes
+        uniform = level_of_detail(self.source_meshes, detail.cell_m(self.intrinsics),
+                                  detail.min_reduction)
+        if detail.max_disagreement is None or uniform.num_triangles == (
+                self.source_meshes.num_triangles):
+            return uniform  # one cell for all, or nothing to simplify
+        if configurations is None:
+            configurations = random_configurations(
+                self.model, detail.calibration_images, seed=0,
+                center=default_view_configuration(self.model))
+        X_CB = self.kinematics.relative_poses(configurations, self.model.camera_frame)
+        measured = measure_detail(
+            self.source_meshes, lambda meshes: self._render_tables(
+                render_tables(meshes, self.kinematics.num_bodies), X_CB),
+            detail.ladder_m(self.intrinsics), detail.max_disagreement,
+            detail.min_reduction, detail.depth_tolerance_m)
+        if measured.robot_px < MIN_CALIBRATION_PX:
+            warnings.warn(f"the level of detail's {len(X_CB)} calibration images show "
+                          f"{measured.robot_px} robot pixels (fewer than "
+                          f"{MIN_CALIBRATION_PX}): its cells are not measured, every body "
+                          f"gets {detail.cell_px} px; pass detail_configurations that show "
+                          f"the robot", stacklevel=3)
+            return uniform
+        self.measured_detail = measured
+        return measured.meshes
 
     def workspace(self, chunks: int) -> tuple:
         """The scoring kernel's scratch (``render_likelihood.kernel_workspace``) for at
@@ -137,10 +176,14 @@ class BatchedDepthRenderer:
             raise ValueError(f"X_CB must have shape (N, {nb}, 4, 4), got {X_CB.shape}")
         if not np.all(np.isfinite(X_CB)):
             raise ValueError("X_CB contains NaN or infinite values")
+        return self._render_tables(self._tables, X_CB)
+
+    def _render_tables(self, tables: tuple, X_CB: np.ndarray) -> np.ndarray:
+        """Renders the meshes of ``tables`` (``render_tables``) at checked poses."""
         k = self.intrinsics
         out = np.empty((X_CB.shape[0], k.height, k.width), dtype=np.float32)
         if X_CB.shape[0] == 0:
             return out
-        render_kernel(X_CB, *self._tables, self._planes, self._fx, self._fy, self._cx,
+        render_kernel(X_CB, *tables, self._planes, self._fx, self._fy, self._cx,
                       self._cy, self.near_m, self.far_m, num_chunks(X_CB.shape[0]), out)
         return out
