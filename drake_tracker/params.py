@@ -24,11 +24,9 @@ import numpy as np
 
 from drake_tracker.core.health import HealthParams
 from drake_tracker.core.kalman import KalmanBankParams
-from drake_tracker.core.likelihood import LikelihoodParams
+from drake_tracker.image_params import ImageParams, validate_image_params
+from drake_tracker.image_params import check_field as _check
 from drake_tracker.robot import VIRTUAL_JOINT_NAMES
-
-#: Names accepted by ``ImageParams.blocks`` besides an explicit list of joint groups.
-BLOCK_MODES = ("per-joint", "arm-camera", "single", "camera")
 
 
 @dataclass
@@ -91,73 +89,6 @@ class KalmanConfig:
     virtual_joints: JointNoise = field(default_factory=_virtual_joint_noise)
     #: Joint name -> its own parameters (replacing the group default).
     overrides: dict[str, JointNoise] = field(default_factory=dict)
-
-
-@dataclass
-class ImageParams:
-    """The Coordinate Particle Filter image update."""
-
-    #: False: images are ignored (the encoders-only method).
-    enabled: bool = True
-    #: Particles per block; likelihood evaluations per image = particles x blocks.
-    num_particles: int = 50
-    #: Particles per block until the arm is acquired (``health.acquired``); 0 =
-    #: ``num_particles``. The first images search the whole initial bias prior: with 50,
-    #: 6 of 6 tracker seeds of arm++/constant lost the arm, with 150 none (docs/defaults.md).
-    acquisition_num_particles: int = 150
-    #: ``per-joint`` (one block per joint, base to tip, then the camera offset),
-    #: ``arm-camera`` (robot joints, then the 6 virtual joints), ``single``, ``camera``
-    #: (only the virtual joints, one block each), or an
-    #: explicit list of blocks given as joint-name lists in ``block_joints``.
-    blocks: str = "per-joint"
-    block_joints: list[list[str]] = field(default_factory=list)
-    #: Resample when KL(weights || uniform) exceeds this (nats).
-    max_kl: float = 2.0
-    #: Likelihood exponents of successive CPF sweeps per image, increasing to 1; [1.0]
-    #: is the paper's single sweep. Evaluations per image = particles x blocks x layers.
-    annealing_betas: list[float] = field(default_factory=lambda: [0.003, 0.03, 0.3, 1.0])
-    #: Images are subsampled to about this width (px) before the update (docs/method.md §4).
-    image_width_px: int = 80
-    #: Per annealing sweep, the width (px) of the image it scores, e.g. [20, 20, 80, 80]:
-    #: the tempered sweeps only place the last one's particles (docs/method.md §4). The
-    #: last must be image_width_px; empty = image_width_px for every sweep.
-    sweep_image_widths_px: list[int] = field(default_factory=list)
-    #: Subtracted from each image's capture stamp to get its time t' (s).
-    image_time_offset_s: float = 0.0
-    #: Images closer than this to the previously processed one are skipped (s); 0 = all.
-    #: 0.1 processes about 10 of a 30 Hz camera's images per second.
-    min_image_interval_s: float = 0.1
-    #: In a Diagram: simulated time (s) from an image's arrival to its observation, the
-    #: update's compute time. > 0: the update runs on a worker thread meanwhile (the
-    #: Simulator waits at the deadline if it is not done); 0: at once, in the Simulator's
-    #: thread. An image due while one is in flight applies that one first.
-    update_latency_s: float = 0.08
-    #: ``batched`` (numba rasteriser) or ``drake`` (RenderEngineVtk, the reference).
-    renderer: str = "batched"
-    near_m: float = 0.1
-    far_m: float = 6.0
-    #: Estimate each image's occlusion probability o (the likelihood's prior
-    #: ``likelihood.occlusion_probability`` is then the prior of that estimate): the
-    #: fraction of the robot's pixels, rendered at the prior mean, that the image shows
-    #: hidden behind something nearer, with a Beta prior worth ``occlusion_prior_pixels``
-    #: pixels. With o fixed at 0.1, an image hiding 78 % of the arm made every hidden pixel
-    #: a 1-in-10 event, and configurations that put the arm out of sight (0 per pixel)
-    #: scored better than the truth: the estimate was dragged away (issue 17).
-    estimate_occlusion: bool = True
-    occlusion_prior_pixels: float = 20.0
-    #: Whether joints that move the camera (a pan-tilt head) may have bias jumps too
-    #: (``bias_jump_rate_per_s``). Off by default: a jump there turns the whole view, and
-    #: measured on s-head-arm with time-varying arm bias it let the filter "explain" a
-    #: misaligned arm by looking away from it (an unrendered robot scores 0 per pixel,
-    #: a misaligned one less): 300 mm from then on.
-    bias_jumps_in_camera_chain: bool = False
-    #: A joint's bias jump is looked for only on an image with at least this many valid
-    #: pixels that a jump of it (either way, by its std) would change, at the prior mean
-    #: (``core/jump_visibility.py``; 0: always).
-    min_jump_pixels: int = 5
-    #: Seed of the particle filter's random numbers (one stream per image sequence).
-    seed: int = 0
-    likelihood: LikelihoodParams = field(default_factory=LikelihoodParams)
 
 
 @dataclass
@@ -234,11 +165,6 @@ def tracker_params_to_yaml(params: TrackerParams) -> str:
     return yaml_dump_typed(params)
 
 
-def _check(cond: bool, where: str, value, why: str) -> None:
-    if not cond:
-        raise ValueError(f"{where} = {value!r}: {why}")
-
-
 #: Largest standard deviation accepted (rad, rad/√s): above it variances overflow.
 MAX_STD = 1e6
 
@@ -274,43 +200,8 @@ def validate_tracker_params(params: TrackerParams) -> None:
     validate_joint_noise(k.virtual_joints, "kalman.virtual_joints")
     for name, noise in k.overrides.items():
         validate_joint_noise(noise, f"kalman.overrides[{name}]")
-    im = params.image
-    _check(im.num_particles >= 1, "image.num_particles", im.num_particles, "must be >= 1")
-    _check(im.min_jump_pixels >= 0, "image.min_jump_pixels", im.min_jump_pixels, "must be >= 0")
-    _check(im.acquisition_num_particles >= 0, "image.acquisition_num_particles",
-           im.acquisition_num_particles, "must be >= 0 (0: image.num_particles)")
-    _check(im.blocks in BLOCK_MODES or im.blocks == "explicit", "image.blocks", im.blocks,
-           f"must be one of {list(BLOCK_MODES)} or 'explicit'")
-    if im.blocks == "explicit":
-        _check(len(im.block_joints) > 0, "image.block_joints", im.block_joints,
-               "must list at least one block when image.blocks is 'explicit'")
-    _check(im.max_kl > 0, "image.max_kl", im.max_kl, "must be > 0")
-    _check(math.isfinite(im.occlusion_prior_pixels) and im.occlusion_prior_pixels > 0,
-           "image.occlusion_prior_pixels", im.occlusion_prior_pixels, "must be > 0")
-    betas = list(im.annealing_betas)
-    _check(bool(betas) and betas[-1] == 1.0 and all(0 < b <= 1 for b in betas)
-           and betas == sorted(betas), "image.annealing_betas", betas,
-           "must increase within (0, 1] and end at 1.0")
-    _check(im.image_width_px >= 1, "image.image_width_px", im.image_width_px, "must be >= 1")
-    _check(not im.sweep_image_widths_px or (
-        len(im.sweep_image_widths_px) == len(betas) and min(im.sweep_image_widths_px) >= 1
-        and im.sweep_image_widths_px[-1] == im.image_width_px), "image.sweep_image_widths_px",
-        im.sweep_image_widths_px, "must be empty, or one width >= 1 per annealing sweep "
-        "ending with image.image_width_px")
-    _check(math.isfinite(im.image_time_offset_s), "image.image_time_offset_s",
-           im.image_time_offset_s, "must be finite")
-    for name in ("min_image_interval_s", "update_latency_s"):
-        value = getattr(im, name)
-        _check(math.isfinite(value) and value >= 0, f"image.{name}", value,
-               "must be finite and >= 0")
-    _check(im.renderer in ("batched", "drake"), "image.renderer", im.renderer,
-           "must be 'batched' or 'drake'")
-    _check(0 < im.near_m < im.far_m, "image.near_m/far_m", (im.near_m, im.far_m),
-           "need 0 < near_m < far_m")
-    im.likelihood.validate("image.likelihood")
+    validate_image_params(params.image)
     params.health.validate()
-    _check(im.seed >= 0 and int(im.seed) == im.seed, "image.seed", im.seed,
-           "must be an integer >= 0")
     for name, value in params.initial_positions_rad.items():
         _check(math.isfinite(value), f"initial_positions_rad[{name}]", value, "must be finite")
     _check(math.isfinite(params.buffer_horizon_s), "buffer_horizon_s",

@@ -25,6 +25,7 @@ from drake_tracker.core.likelihood import (
     PreparedObservation,
     coarser_observation,
     prepare_observation,
+    widened_observation,
 )
 from drake_tracker.core.render_batched import BatchedDepthRenderer
 from drake_tracker.core.renderer import make_renderer
@@ -93,7 +94,8 @@ class CpfImageUpdate:
                  num_particles: int, likelihood: LikelihoodParams, image_width_px: int = 80,
                  max_kl: float = 2.0, renderer: str = "batched", near_m: float = 0.1,
                  far_m: float = 6.0, annealing_betas: tuple[float, ...] = (1.0,),
-                 sweep_image_widths_px: tuple[int, ...] = ()) -> None:
+                 sweep_image_widths_px: tuple[int, ...] = (),
+                 search_depth_widening_m: float = 0.0) -> None:
         likelihood.validate()
         if num_particles < 1:
             raise ValueError(f"num_particles must be >= 1, got {num_particles}")
@@ -125,6 +127,13 @@ class CpfImageUpdate:
                                                  renderer, near_m, far_m)
                                 for f in set(self.sweep_factors) if f > 1}
         self.sweep_renderers[1] = self.renderer
+        if not (np.isfinite(search_depth_widening_m) and search_depth_widening_m >= 0):
+            raise ValueError(f"search_depth_widening_m must be finite and >= 0, got "
+                             f"{search_depth_widening_m}")
+        #: Per sweep of the start-up search, the depth σ added to every pixel's (m):
+        #: ``search_depth_widening_m`` (1 - β).
+        self.search_widening_m = tuple(float(search_depth_widening_m) * (1.0 - b)
+                                       for b in self.annealing_betas)
         self.times = StageTimes()
 
     @property
@@ -177,7 +186,8 @@ class CpfImageUpdate:
         ``jump_probability``/``jump_std`` (n,) let the prior of each angle admit a jump
         (a bias step since the previous image; see ``core/cpf.py``); ``num_particles``
         overrides the particles per block for this image; ``coarse_sweeps`` False scores
-        every sweep at full resolution (the tracker's start-up search)."""
+        every sweep at full resolution, widened by ``search_widening_m`` (the tracker's
+        start-up search)."""
         if observation.num_valid == 0:
             return None
         t0 = time.perf_counter()
@@ -187,7 +197,8 @@ class CpfImageUpdate:
             num_particles or self.num_particles, self._likelihood(observation, self.renderer),
             rng, self.max_kl, self.annealing_betas, jump_probability=jump_probability,
             jump_std=jump_std,
-            sweep_log_likelihoods=self._sweep_scores(observation) if coarse_sweeps else (),
+            sweep_log_likelihoods=(self._sweep_scores(observation) if coarse_sweeps
+                                   else self._search_scores(observation)),
             sweep=compiled_sweep)
         total = time.perf_counter() - t0
         self.times.filter_s += total - (self.times.render_s + self.times.likelihood_s
@@ -195,6 +206,13 @@ class CpfImageUpdate:
         self.times.updates += 1
         self.times.per_update.append(total)
         return result
+
+    def _search_scores(self, observation: PreparedObservation) -> list:
+        """Per sweep of the start-up search, its likelihood on ``observation`` widened by
+        ``search_widening_m`` (None: the observation as it is)."""
+        return [None if extra == 0 else
+                self._likelihood(widened_observation(observation, extra), self.renderer)
+                for extra in self.search_widening_m]
 
     def _sweep_scores(self, observation: PreparedObservation) -> list:
         """Per sweep, the log-likelihood of its coarser image scaled to the valid pixels

@@ -19,9 +19,8 @@ invalid pixels (NaN, <= 0, > Z_max) score 0. A particle's log-likelihood is the 
 """
 
 
-import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numba
@@ -174,6 +173,29 @@ def prepare_observation(depth: np.ndarray, params: LikelihoodParams) -> Prepared
         truncation=params.truncation)
 
 
+def widened_observation(observation: PreparedObservation,
+                        extra_std_m: float) -> PreparedObservation:
+    """``observation`` with every pixel's depth noise σ widened by ``extra_std_m`` (m),
+    its per-pixel occlusion estimate kept: what :func:`prepare_observation` gives with
+    ``depth_noise_std_m + extra_std_m``, times the occlusion factors. A likelihood whose
+    peaks are that much wider in depth: the start-up search's early sweeps (see
+    ``image_update``)."""
+    if not (math.isfinite(extra_std_m) and extra_std_m >= 0):
+        raise ValueError(f"extra_std_m must be finite and >= 0, got {extra_std_m}")
+    if extra_std_m == 0:
+        return observation
+    sigma = observation.sigma + extra_std_m
+    lam = observation.occluder_rate_per_m
+    # gauss ∝ 1/σ; occ ∝ exp(λ²σ²/2) (prepare_observation), so both scale per pixel.
+    growth = np.exp(0.5 * lam**2 * (np.square(sigma) - np.square(observation.sigma)))
+    occ_base = np.exp(observation.log_p_occ_inf) - observation.uniform
+    return replace(
+        observation, sigma=sigma, gauss_coeff=observation.gauss_coeff * observation.sigma / sigma,
+        occ_coeff=observation.occ_coeff * growth, inv_sigma=1.0 / sigma,
+        lam_sigma2=lam * np.square(sigma),
+        log_p_occ_inf=np.log(observation.uniform + occ_base * growth))
+
+
 def coarser_observation(observation: PreparedObservation,
                         factor: int) -> PreparedObservation:
     """``observation`` subsampled again: its pixels (factor*i, factor*j), with their
@@ -193,8 +215,8 @@ def coarser_observation(observation: PreparedObservation,
     per_pixel = {name: getattr(observation, name)[kept] for name in (
         "z", "sigma", "gauss_coeff", "occ_coeff", "log_p_occ_inf", "inv_sigma",
         "lam_sigma2")}
-    return dataclasses.replace(observation, pixel_index=index, shape=shape,
-                               pixel_slot=slot, **per_pixel)
+    return replace(observation, pixel_index=index, shape=shape,
+                   pixel_slot=slot, **per_pixel)
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)

@@ -123,7 +123,8 @@ class ImageProcessor:
         self.update = CpfImageUpdate(
             model, camera, blocks, im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
-            tuple(im.annealing_betas), tuple(im.sweep_image_widths_px))
+            tuple(im.annealing_betas), tuple(im.sweep_image_widths_px),
+            im.search_depth_widening_m)
         self.search = EncoderSearch(self.update, params, self._occlusion_aware, noise,
                                     np.isin(model.joint_names, model.robot_joint_names),
                                     self.restart)
