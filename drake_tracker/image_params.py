@@ -44,15 +44,17 @@ class ImageParams:
     #: the tempered sweeps only place the last one's particles (docs/method.md §4). The
     #: last must be image_width_px; empty = image_width_px for every sweep.
     sweep_image_widths_px: list[int] = field(default_factory=list)
-    #: The start-up search (the first images, and the second opinion and the challenger,
-    #: which run it from the encoders' arm) scores each annealing sweep with every
-    #: pixel's depth σ widened by this (m) times (1 - β): the early sweeps see wider
-    #: peaks, so that an arm off by more than its own thickness in the image still finds
-    #: the way to the observed one; the last (β = 1) scores the image as it is. 0: no
-    #: widening. Measured on example-robot-data's Panda seen from 1.5 m (8.6 deg
-    #: biases, camera 2 cm / 2 deg off): without it the search hid the arm behind the
-    #: observed one, 417-467 mm off on 4 of 4 seeds at 1 s (README, "A vendor's robot").
-    search_depth_widening_m: float = 0.05
+    #: Until the arm is first held (at the start, and after a restart from the
+    #: encoders), the start-up search may score each annealing sweep with every pixel's
+    #: depth σ widened by this (m) times (1 - β), the last (β = 1) as it is: wider peaks
+    #: lead an arm that is off by more than its own thickness in the image to the
+    #: observed one. 0 (default): no widening. 0.05 tracks example-robot-data's Panda
+    #: seen from 1.5 m with 8.6 deg biases and its camera 2 cm / 2 deg off, which the
+    #: plain search hides behind the observed arm (417-467 mm at 1 s on 4 of 4 seeds);
+    #: on the quick suite it costs more than it gains (medians over seeds: s-full-arm and
+    #: arm++ with a constant bias 1.15 -> 1.42 and 1.41 -> 1.84 mm, lasting occlusion
+    #: 22.9 -> 40.2; in-out-in without bias 18.5 -> 5.3): README, "A vendor's robot".
+    search_depth_widening_m: float = 0.0
     #: Subtracted from each image's capture stamp to get its time t' (s).
     image_time_offset_s: float = 0.0
     #: Images closer than this to the previously processed one are skipped (s); 0 = all.

@@ -8,15 +8,18 @@ import numpy as np
 import pytest
 
 from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.health import TrackerHealth
 from drake_tracker.core.image_update import CpfImageUpdate
+from drake_tracker.core.kalman import MEAN_A
 from drake_tracker.core.likelihood import (
     LikelihoodParams,
     prepare_observation,
     widened_observation,
 )
 from drake_tracker.core.occlusion import with_pixel_occlusion
+from drake_tracker.core.pipeline import ImageProcessor, make_bank_and_prior
 from drake_tracker.core.renderer import default_view_configuration
-from drake_tracker.params import load_tracker_params
+from drake_tracker.params import TrackerParams, load_tracker_params
 
 PER_PIXEL = ("sigma", "gauss_coeff", "occ_coeff", "log_p_occ_inf", "inv_sigma",
              "lam_sigma2")
@@ -85,3 +88,35 @@ def test_widening_is_validated_at_load(tmp_path, value):
     path.write_text(f"image: {{search_depth_widening_m: {value}}}\n")
     with pytest.raises(ValueError, match="image.search_depth_widening_m"):
         load_tracker_params(path)
+
+
+@pytest.mark.parametrize("health, widened", [
+    (TrackerHealth(), True),  # the start: never held
+    (TrackerHealth(confirmed_s=-0.5, acquired=False), False),  # held once, lost since
+    (TrackerHealth(confirmed_s=0.0, acquired=True), False)])
+def test_only_an_arm_never_held_is_searched_for_widened(health, widened):
+    """The pipeline widens the update's search while the arm was never held, and only
+    then (held once and lost, the search after an occlusion is not widened: the quick
+    suite's lasting occlusion 23 -> 93 mm when every search was)."""
+    from test_restart import CAMERA, apollo_in_view
+
+    model, truth, frame = apollo_in_view(noise_seed=5)
+    params = TrackerParams()
+    params.image.search_depth_widening_m = 0.05
+    processor = ImageProcessor(model, CAMERA, params)
+    calls = []
+
+    class Spy:  # the update, recording whether each call is widened
+        def __getattr__(self, name):
+            return getattr(update, name)
+
+        def __call__(self, *args, **kwargs):
+            calls.append(kwargs.get("widened", False))
+            return update(*args, **kwargs)
+
+    update = processor.update
+    processor.update = Spy()
+    _, prior = make_bank_and_prior(model, params, truth[:len(model.robot_joint_names)])
+    prior[MEAN_A] = truth
+    outcome = processor.observe(frame, prior, 0.1, health)
+    assert outcome.observation is not None and calls[0] == widened

@@ -180,14 +180,14 @@ class CpfImageUpdate:
     def __call__(self, prior: np.ndarray, observation: PreparedObservation,
                  rng: np.random.Generator, jump_probability: np.ndarray | None = None,
                  jump_std: np.ndarray | None = None, num_particles: int | None = None,
-                 coarse_sweeps: bool = True) -> CPFResult | None:
+                 coarse_sweeps: bool = True, widened: bool = False) -> CPFResult | None:
         """Angle marginals after the image, or None for an image with no valid pixel.
 
         ``jump_probability``/``jump_std`` (n,) let the prior of each angle admit a jump
         (a bias step since the previous image; see ``core/cpf.py``); ``num_particles``
         overrides the particles per block for this image; ``coarse_sweeps`` False scores
-        every sweep at full resolution, widened by ``search_widening_m`` (the tracker's
-        start-up search)."""
+        every sweep at full resolution (the tracker's start-up search); ``widened`` scores
+        them widened by ``search_widening_m`` (the search for an arm never held yet)."""
         if observation.num_valid == 0:
             return None
         t0 = time.perf_counter()
@@ -197,8 +197,8 @@ class CpfImageUpdate:
             num_particles or self.num_particles, self._likelihood(observation, self.renderer),
             rng, self.max_kl, self.annealing_betas, jump_probability=jump_probability,
             jump_std=jump_std,
-            sweep_log_likelihoods=(self._sweep_scores(observation) if coarse_sweeps
-                                   else self._search_scores(observation)),
+            sweep_log_likelihoods=(self._search_scores(observation) if widened else
+                                   self._sweep_scores(observation) if coarse_sweeps else ()),
             sweep=compiled_sweep)
         total = time.perf_counter() - t0
         self.times.filter_s += total - (self.times.render_s + self.times.likelihood_s

@@ -237,9 +237,12 @@ class ImageProcessor:
                                      self.consistent(predicted))
             jumps[joints[~testable]] = 0.0
         rng = image_rng(self.params.image.seed, frame.sequence)
+        # An arm never held since the start or a restart: the search may be widened in
+        # depth (image.search_depth_widening_m).
+        never_held = not acquired and (restarted or not np.isfinite(health.confirmed_s))
         result = self.update(prior, observation, rng, jumps, self._jump_std,
                              None if acquired else self.params.image.acquisition_num_particles,
-                             coarse_sweeps=acquired)
+                             coarse_sweeps=acquired, widened=never_held)
         if result is None:
             return ImageOutcome(None, None, None)
         # (A restart above has cleared ``acquired``.) A second opinion from the encoders'
