@@ -96,7 +96,8 @@ def bench_kalman(model: TrackerModel, params: TrackerParams, repeats: int = 2000
     mean over ``repeats``), and ``replay_us_per_reading``, re-filtering one buffered reading
     after an image is inserted about 0.1 s back (µs); ``bank_variance_check`` is the largest
     angle variance afterwards."""
-    bank = JointKalmanBank(resolve_kalman_params(params, model.joint_names))
+    bank = JointKalmanBank(resolve_kalman_params(params, model.joint_names,
+                                                   model.prismatic_joint_names))
     belief = initial_moments(np.zeros(model.num_joints), np.full(model.num_joints, 0.1),
                              np.full(model.num_joints, 0.1), np.ones(model.num_joints, bool))
     reading = np.zeros(model.num_joints)

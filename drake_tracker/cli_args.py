@@ -112,7 +112,8 @@ def check_params_for_model(params: TrackerParams, model: TrackerModel, where: st
     from drake_tracker.params import resolve_blocks, resolve_kalman_params
 
     try:
-        resolve_kalman_params(params, list(model.joint_names))
+        resolve_kalman_params(params, list(model.joint_names),
+                              model.prismatic_joint_names)
         resolve_blocks(params, list(model.joint_names))
     except ValueError as err:
         raise UsageError(f"{where}: {_one_line(err)}") from None

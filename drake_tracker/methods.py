@@ -35,21 +35,37 @@ def method_params(method: str, base: TrackerParams | None = None,
         params.image.enabled = False
         params.estimate_camera_offset = False
     elif method == "camera_offset_only":
-        robot = params.kalman.robot_joints
-        params.kalman.robot_joints = JointNoise(
-            encoder_noise_std_rad=robot.encoder_noise_std_rad,
-            angle_process_std_rad_per_sqrt_s=robot.angle_process_std_rad_per_sqrt_s,
-            bias_process_std_rad_per_sqrt_s=0.0, bias_decay_per_s=robot.bias_decay_per_s,
-            has_bias=False, initial_angle_std_rad=robot.encoder_noise_std_rad,
-            initial_bias_std_rad=0.0)
+        k = params.kalman
+        k.robot_joints, k.prismatic_joints = (_trusted(j) for j in (k.robot_joints,
+                                                                    k.prismatic_joints))
         params.image.blocks = "camera"
     elif method == "vision_only":
         params.use_joint_readings = False
-        robot = params.kalman.robot_joints
-        params.kalman.robot_joints = JointNoise(
-            encoder_noise_std_rad=robot.encoder_noise_std_rad,
-            angle_process_std_rad_per_sqrt_s=VISION_ONLY_ANGLE_STD_RAD_PER_SQRT_S,
-            bias_process_std_rad_per_sqrt_s=0.0, bias_decay_per_s=1.0, has_bias=False,
-            initial_angle_std_rad=0.05, initial_bias_std_rad=0.0)
+        k = params.kalman
+        # A prismatic joint's in metres: scaled as its bias prior is against a revolute's.
+        scale = k.prismatic_joints.initial_bias_std_rad / k.robot_joints.initial_bias_std_rad
+        k.robot_joints = _unread(k.robot_joints, 1.0)
+        k.prismatic_joints = _unread(k.prismatic_joints, scale)
         params.initial_positions_rad = dict(initial_positions_rad or {})
     return params
+
+
+def _trusted(joint: JointNoise) -> JointNoise:
+    """``joint`` without a bias: its encoder is taken as it reads."""
+    return JointNoise(
+        encoder_noise_std_rad=joint.encoder_noise_std_rad,
+        angle_process_std_rad_per_sqrt_s=joint.angle_process_std_rad_per_sqrt_s,
+        bias_process_std_rad_per_sqrt_s=0.0, bias_decay_per_s=joint.bias_decay_per_s,
+        has_bias=False, initial_angle_std_rad=joint.encoder_noise_std_rad,
+        initial_bias_std_rad=0.0)
+
+
+def _unread(joint: JointNoise, scale: float) -> JointNoise:
+    """``joint`` for a tracker without encoder readings: no bias, the angle a random
+    walk of ``VISION_ONLY_ANGLE_STD_RAD_PER_SQRT_S`` (times ``scale``, for a joint in
+    other units) from a prior of 0.05 (times ``scale``)."""
+    return JointNoise(
+        encoder_noise_std_rad=joint.encoder_noise_std_rad,
+        angle_process_std_rad_per_sqrt_s=VISION_ONLY_ANGLE_STD_RAD_PER_SQRT_S * scale,
+        bias_process_std_rad_per_sqrt_s=0.0, bias_decay_per_s=1.0, has_bias=False,
+        initial_angle_std_rad=0.05 * scale, initial_bias_std_rad=0.0)

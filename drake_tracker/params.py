@@ -17,6 +17,7 @@ Example YAML (every field optional)::
 """
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -81,11 +82,27 @@ def _virtual_joint_noise() -> JointNoise:
     )
 
 
+def _prismatic_joint_noise() -> JointNoise:
+    # A robot's sliding joints (a gripper's fingers): the revolute defaults' roles in
+    # metres. A bias prior of 1 cm, not the 0.1 "rad" (10 cm) of a revolute joint,
+    # which let the Panda's finger estimates drift 3 cm below their joint limit.
+    return JointNoise(
+        encoder_noise_std_rad=2e-5,
+        bias_process_std_rad_per_sqrt_s=0.002,
+        bias_jump_std_rad=0.01,
+        initial_angle_std_rad=0.0035,
+        initial_bias_std_rad=0.01,
+    )
+
+
 @dataclass
 class KalmanConfig:
-    """Per-joint filter parameters: defaults for robot and virtual joints, and overrides."""
+    """Per-joint filter parameters: defaults for the robot's revolute and prismatic
+    joints and for the virtual joints, and overrides."""
 
     robot_joints: JointNoise = field(default_factory=JointNoise)
+    #: The robot's prismatic joints (``TrackerModel.prismatic_joint_names``), in m.
+    prismatic_joints: JointNoise = field(default_factory=_prismatic_joint_noise)
     virtual_joints: JointNoise = field(default_factory=_virtual_joint_noise)
     #: Joint name -> its own parameters (replacing the group default).
     overrides: dict[str, JointNoise] = field(default_factory=dict)
@@ -197,6 +214,7 @@ def validate_tracker_params(params: TrackerParams) -> None:
     """Model-independent checks; raises ValueError naming the field."""
     k = params.kalman
     validate_joint_noise(k.robot_joints, "kalman.robot_joints")
+    validate_joint_noise(k.prismatic_joints, "kalman.prismatic_joints")
     validate_joint_noise(k.virtual_joints, "kalman.virtual_joints")
     for name, noise in k.overrides.items():
         validate_joint_noise(noise, f"kalman.overrides[{name}]")
@@ -222,8 +240,11 @@ def validate_tracker_params(params: TrackerParams) -> None:
            "must be an integer >= 2")
 
 
-def joint_noise_for(params: TrackerParams, joint_names: list[str]) -> list[JointNoise]:
-    """The JointNoise of each joint; unknown override names raise ValueError."""
+def joint_noise_for(params: TrackerParams, joint_names: list[str],
+                    prismatic: Collection[str] = ()) -> list[JointNoise]:
+    """The JointNoise of each joint: its override, else the virtual joints', the
+    prismatic joints' (``prismatic``: the robot's, ``TrackerModel.prismatic_joint_names``)
+    or the robot joints' default; unknown override names raise ValueError."""
     unknown = sorted(set(params.kalman.overrides) - set(joint_names))
     if unknown:
         raise ValueError(f"kalman.overrides: unknown joint names {unknown}; the model's "
@@ -234,15 +255,19 @@ def joint_noise_for(params: TrackerParams, joint_names: list[str]) -> list[Joint
             out.append(params.kalman.overrides[name])
         elif name in VIRTUAL_JOINT_NAMES:
             out.append(params.kalman.virtual_joints)
+        elif name in prismatic:
+            out.append(params.kalman.prismatic_joints)
         else:
             out.append(params.kalman.robot_joints)
     return out
 
 
-def resolve_kalman_params(params: TrackerParams, joint_names: list[str]) -> KalmanBankParams:
-    """The bank's per-joint arrays for ``joint_names`` (virtual joints included)."""
+def resolve_kalman_params(params: TrackerParams, joint_names: list[str],
+                          prismatic: Collection[str] = ()) -> KalmanBankParams:
+    """The bank's per-joint arrays for ``joint_names`` (virtual joints included;
+    ``prismatic``: see :func:`joint_noise_for`)."""
     validate_tracker_params(params)
-    noise = joint_noise_for(params, joint_names)
+    noise = joint_noise_for(params, joint_names, prismatic)
     has_bias = np.array([j.has_bias for j in noise], bool)
     return KalmanBankParams(
         encoder_noise_std=np.array([j.encoder_noise_std_rad for j in noise]),

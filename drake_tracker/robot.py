@@ -341,6 +341,15 @@ class TrackerModel:
         """The robot's own joints in position order: the order of the encoder readings."""
         return [n for n in self.joint_names if n not in VIRTUAL_JOINT_NAMES]
 
+    @property
+    def prismatic_joint_names(self) -> list[str]:
+        """The robot's own joints that translate (their positions in m, not rad): their
+        filters default to ``kalman.prismatic_joints``."""
+        robot = set(self.robot_joint_names)
+        joints = (self.plant.get_joint(i) for i in self.plant.GetJointIndices())
+        return [j.name() for j in joints
+                if j.name() in robot and j.type_name() == "prismatic"]
+
 
 def build_tracker_model(config: RobotConfig) -> TrackerModel:
     """Loads ``config``'s robot, adds the virtual camera joints, and finalizes."""

@@ -110,7 +110,7 @@ class ImageProcessor:
         im = params.image
         chain = camera_chain_joints(model)
         blocks = resolve_blocks(params, model.joint_names, chain)
-        noise = joint_noise_for(params, model.joint_names)
+        noise = joint_noise_for(params, model.joint_names, model.prismatic_joint_names)
         biased = np.array([j.has_bias for j in noise])
         if not im.bias_jumps_in_camera_chain:
             biased &= np.array([name not in chain for name in model.joint_names])
@@ -335,8 +335,9 @@ def make_bank_and_prior(model: TrackerModel, params: TrackerParams, first_readin
     reading of the robot joints (or ``initial_positions_rad``), virtual joints at 0."""
     validate_tracker_params(params)
     names = model.joint_names
-    bank = JointKalmanBank(resolve_kalman_params(params, names))
-    noise = joint_noise_for(params, names)
+    prismatic = model.prismatic_joint_names
+    bank = JointKalmanBank(resolve_kalman_params(params, names, prismatic))
+    noise = joint_noise_for(params, names, prismatic)
     mean = np.zeros(len(names))
     unknown = sorted(set(params.initial_positions_rad) - set(names))
     if unknown:
