@@ -1,6 +1,7 @@
 """The tracker's parameters: dataclasses that load from YAML with ``yaml_load_typed``.
 
-Units are in the field names: ``_rad`` (rad, or m for the prismatic virtual joints),
+Units are in the field names: ``_rad`` (rad, or m for prismatic joints: the virtual
+camera joints' x, y, z and the robot's own, ``kalman.prismatic_joints``),
 ``_per_sqrt_s`` (standard deviation growth per square root of a second), ``_per_s``,
 ``_m``, ``_s``, ``_px``. The paper's models (docs/method.md §2) are written per second; dbrt's
 per-message values were converted and then chosen by measurement (see ``docs/``).
