@@ -53,6 +53,36 @@ def test_health_states_follow_consecutive_images():
     assert states == ["U", "T", "U", "U", "L", "L", "L", "T", "U", "U"]
 
 
+def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
+    """While a challenger is out (the estimate's biases are implausible), images that
+    agree with the estimate report ``uncertain``; every other field, and the states
+    once it is gone, are those of the same images without it."""
+    from drake_tracker.core.health import Challenger
+
+    p = HealthParams(min_robot_pixels=10, lost_after_images=2, recovered_after_images=2)
+    good = ImageConsistency(0.0, 100, 0.9, 0.02)
+    bad = ImageConsistency(0.0, 100, 0.2, 0.6)
+    hidden = ImageConsistency(0.0, 100, 0.05, 0.0, occluded=0.95)
+    out = Challenger(np.zeros(3), np.ones(3), 0.0)
+    images = [good, good, good, bad, good, good, hidden, good, good, bad, bad, good, good]
+    challenged = [False, False, True, True, True, True, True, True, False, True, False,
+                  False, False]
+    with_it, without = TrackerHealth(), TrackerHealth()
+    for k, (image, has) in enumerate(zip(images, challenged)):
+        image = ImageConsistency(0.1 * k, image.robot_pixels, image.agreement,
+                                 image.see_through, image.occluded)
+        with_it = next_health(with_it, image, p, challenger=out if has else None)
+        without = next_health(without, image, p)
+        if has and without.state == HealthState.TRACKING:
+            assert with_it.state == HealthState.UNCERTAIN, k
+        else:
+            assert with_it.state == without.state, k
+        for field in ("disagreeing_in_a_row", "agreeing_in_a_row", "confirmed_s",
+                      "acquired", "left_view"):
+            assert getattr(with_it, field) == getattr(without, field), (k, field)
+    assert with_it.state == HealthState.TRACKING
+
+
 def test_acquired_while_a_recent_image_confirmed_the_estimate():
     p = HealthParams(min_robot_pixels=10, recovered_after_images=1, reacquire_after_s=1.0)
     good = ImageConsistency(0.0, 100, 0.9, 0.02)

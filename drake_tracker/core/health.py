@@ -18,7 +18,10 @@ normalised innovation) and compared, pixel by pixel, with the image:
 * ``tracking``: the latest images agree with the estimate;
 * ``uncertain``: the latest image saw too little of the robot to say (fewer than
   ``min_robot_pixels`` unoccluded robot pixels: out of view, or hidden), or one image
-  disagreed;
+  disagreed, or the images agree but the estimate's biases are implausible (a
+  challenger belief is out, ``core/second_opinion.py``): a wrong fold can explain the
+  images, as example-robot-data's Panda showed, its arm hidden behind the observed one
+  with 99 % of its unhidden pixels agreeing;
 * ``lost``: ``lost_after_images`` consecutive images disagreed (``see_through`` above
   ``max_see_through``): the images keep contradicting the belief, and the filter has not
   re-acquired (one image that shows a bias step and is followed at once is one
@@ -314,5 +317,11 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
     since = min(health.misplaced_since_s, image.time_s) if misplaced else float("inf")
     left_view = state != HealthState.TRACKING and (
         health.left_view or image.robot_pixels < params.min_robot_pixels)
+    if state == HealthState.TRACKING and challenger is not None:
+        # The images agree with the estimate, but its biases are implausible: it may be
+        # a wrong fold that explains them. Reported only: the arm still counts as
+        # confirmed (``confirmed_s``, ``acquired``) and the next image's state does not
+        # depend on it (an internal TRACKING has at least two agreeing images in a row).
+        state = HealthState.UNCERTAIN
     return TrackerHealth(state, image, bad, good, confirmed, acquired, health.restarts, since,
                          left_view, challenger)
