@@ -107,3 +107,12 @@ def test_primitive_robots_keep_their_meshes():
 def test_bad_level_of_detail_is_rejected():
     with pytest.raises(ValueError, match="cell_px"):
         LevelOfDetail(cell_px=0.0)
+    for bad in ({"max_disagreement": 1.0}, {"max_disagreement": -0.1},
+                {"finest_cell_px": 4.0}, {"finest_cell_px": 0.0}, {"calibration_images": 0},
+                {"depth_tolerance_m": 0.0}, {"reference_depth_m": -1.0},
+                {"min_reduction": 0.5}):
+        with pytest.raises(ValueError, match="LevelOfDetail needs"):
+            LevelOfDetail(**bad)
+    LevelOfDetail(max_disagreement=None, finest_cell_px=9.0)  # one cell: no ladder
+    assert list(LevelOfDetail().ladder_m(FULL.subsampled(8))) == [3.0, 2.0, 1.333333,
+                                                                  0.888889, 0.592593]
