@@ -147,30 +147,36 @@ def body_options(parts: dict[int, BodyMesh], render: RenderMeshes, names: list[s
     return options
 
 
-def _best_step(wrong: list[list[int]], cost: list[list[float]],
-               chosen: list[int]) -> tuple[int, int] | None:
-    """The (body, option) that removes the most wrong pixels per unit of added cost (a
-    cheaper option with fewer wrong pixels first), or None if no option removes any."""
+def _best_switch(wrong: list[list[int]], cost: list[list[float]], chosen: list[int],
+                 ratio: Callable[[int, float], float | None]) -> tuple[int, int] | None:
+    """The (body, option) whose switch from its chosen option has the largest
+    ``ratio(removed, added)`` (wrong pixels it removes, cost it adds; None: not a
+    candidate), or None if no switch is a candidate."""
     best, best_ratio = None, -np.inf
     for b, (w, c) in enumerate(zip(wrong, cost)):
         for k in range(len(w)):
-            gain = w[chosen[b]] - w[k]
-            if gain <= 0:
-                continue
-            extra = c[k] - c[chosen[b]]
-            ratio = np.inf if extra <= 0 else gain / extra
-            if ratio > best_ratio:
-                best, best_ratio = (b, k), ratio
+            r = ratio(w[chosen[b]] - w[k], c[k] - c[chosen[b]])
+            if r is not None and r > best_ratio:
+                best, best_ratio = (b, k), r
     return best
+
+
+def _refining(removed: int, added: float) -> float | None:
+    """A switch that removes wrong pixels, by pixels removed per cost added (a cheaper
+    one first)."""
+    if removed <= 0:
+        return None
+    return np.inf if added <= 0 else removed / added
 
 
 def choose_options(wrong: list[list[int]], cost: list[list[float]],
                    budget: float) -> list[int]:
     """For each body (``wrong[b][k]``, ``cost[b][k]``: its option k's wrong pixels and
-    cost), the option to take: from each body's cheapest, greedy steps of
-    :func:`_best_step` until the wrong pixels add up to at most ``budget``; then, while
-    one fits, the cheaper option that saves the most cost per wrong pixel it adds. No
-    single body can then take a cheaper option without exceeding the budget."""
+    cost), the option to take: from each body's cheapest, the switches that remove the
+    most wrong pixels per cost added until the wrong pixels add up to at most
+    ``budget``; then, while one fits, the cheaper option that saves the most cost per
+    wrong pixel it adds. No single body can then take a cheaper option without
+    exceeding the budget."""
     chosen = [min(range(len(c)), key=lambda k, c=c, w=w: (c[k], w[k]))
               for w, c in zip(wrong, cost)]
 
@@ -178,23 +184,22 @@ def choose_options(wrong: list[list[int]], cost: list[list[float]],
         return sum(w[k] for w, k in zip(wrong, chosen))
 
     while total() > budget:
-        step = _best_step(wrong, cost, chosen)
+        step = _best_switch(wrong, cost, chosen, _refining)
         if step is None:
             return chosen
         chosen[step[0]] = step[1]
-    while True:  # the cheaper option that saves the most cost per wrong pixel added
+
+    spare = budget - total()
+
+    def coarsening(removed: int, added: float) -> float | None:
+        if added >= 0 or -removed > spare:  # not cheaper, or over the budget
+            return None
+        return np.inf if removed >= 0 else added / removed  # cost saved per pixel added
+
+    while (step := _best_switch(wrong, cost, chosen, coarsening)) is not None:
+        chosen[step[0]] = step[1]
         spare = budget - total()
-        best, best_ratio = None, 0.0
-        for b, (w, c) in enumerate(zip(wrong, cost)):
-            for k in range(len(w)):
-                saved, added = c[chosen[b]] - c[k], w[k] - w[chosen[b]]
-                if saved > 0 and added <= spare:
-                    ratio = np.inf if added <= 0 else saved / added
-                    if ratio > best_ratio:
-                        best, best_ratio = (b, k), ratio
-        if best is None:
-            return chosen
-        chosen[best[0]] = best[1]
+    return chosen
 
 
 def measure_detail(source: RobotMeshes, render: RenderMeshes, cells_m: dict[float, float],
