@@ -20,16 +20,16 @@ __version__ = "0.1.0"
 _PUBLIC = {
     **_SYSTEMS,
     "Tracker": "drake_tracker.tracker",
-    "TrackerParams": "drake_tracker.params",
-    "load_tracker_params": "drake_tracker.params",
-    "RobotConfig": "drake_tracker.robot",
-    "FrameOffset": "drake_tracker.robot",
-    "TrackerModel": "drake_tracker.robot",
-    "build_tracker_model": "drake_tracker.robot",
-    "load_robot_config": "drake_tracker.robot",
-    "default_home_positions": "drake_tracker.robot",
-    "CameraIntrinsics": "drake_tracker.core.camera",
-    "DepthFrame": "drake_tracker.core.frames",
+    "TrackerParams": "drake_tracker.params.tracker_params",
+    "load_tracker_params": "drake_tracker.params.tracker_params",
+    "RobotConfig": "drake_tracker.robot.model",
+    "FrameOffset": "drake_tracker.robot.model",
+    "TrackerModel": "drake_tracker.robot.model",
+    "build_tracker_model": "drake_tracker.robot.model",
+    "load_robot_config": "drake_tracker.robot.model",
+    "default_home_positions": "drake_tracker.robot.model",
+    "CameraIntrinsics": "drake_tracker.core.sensors.camera",
+    "DepthFrame": "drake_tracker.core.sensors.depth_frames",
 }
 
 __all__ = ["__version__", *_PUBLIC]

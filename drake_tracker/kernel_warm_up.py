@@ -15,13 +15,13 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING
 
-from drake_tracker.offline import replay_run
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.io.replay import replay_run
+from drake_tracker.io.synthetic import synthetic_run
 
 if TYPE_CHECKING:
-    from drake_tracker.core.camera import CameraIntrinsics
-    from drake_tracker.params import TrackerParams
-    from drake_tracker.robot import TrackerModel
+    from drake_tracker.core.sensors.camera import CameraIntrinsics
+    from drake_tracker.params.tracker_params import TrackerParams
+    from drake_tracker.robot.model import TrackerModel
 
 #: Length of the synthetic recording replayed (s): its images include the start-up
 #: search's and the tracking ones.

@@ -8,7 +8,7 @@ CPF image update. Readings and images may come in any interleaving: an image sta
 ``t'`` and the readings after it are filtered again.
 
 The Drake systems in ``drake_tracker.systems`` call the same pieces
-(``drake_tracker.core.pipeline``), and give the same estimates from the same data
+(``drake_tracker.core.image_step``), and give the same estimates from the same data
 (``tests/test_systems.py``).
 """
 
@@ -20,14 +20,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import BeliefBuffer
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.cpf import CPFResult
-from drake_tracker.core.depth_units import check_depth_units
-from drake_tracker.core.estimate import PoseReadout, TrackerEstimate, estimate_from_belief
-from drake_tracker.core.frames import DepthFrame, depth_to_metres
-from drake_tracker.core.health import TrackerHealth, next_health
-from drake_tracker.core.pipeline import (
+from drake_tracker.core.cpf.particle_filter import CPFResult
+from drake_tracker.core.filter.belief_buffer import BeliefBuffer
+from drake_tracker.core.filter.estimate import PoseReadout, TrackerEstimate, estimate_from_belief
+from drake_tracker.core.image_step import (
     ImageProcessor,
     full_reading,
     jump_window_s,
@@ -35,18 +31,22 @@ from drake_tracker.core.pipeline import (
     new_belief_buffer,
     robot_joint_indices,
 )
-from drake_tracker.core.rate_limited_warning import RateLimitedWarning
-from drake_tracker.core.reading_gate import ReadingGate
-from drake_tracker.core.timestamps import (
+from drake_tracker.core.robustness.health import TrackerHealth, next_health
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame, depth_to_metres
+from drake_tracker.core.sensors.depth_units import check_depth_units
+from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.sensors.reading_gate import ReadingGate
+from drake_tracker.core.sensors.timestamps import (
     StreamClock,
     follow_buffer,
     log_reanchor,
     problem_kind,
 )
-from drake_tracker.params import TrackerParams, validate_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams, validate_tracker_params
 
 if TYPE_CHECKING:
-    from drake_tracker.robot import TrackerModel
+    from drake_tracker.robot.model import TrackerModel
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,7 @@ class Tracker:
         #: Images stamped before this are not due yet (``ImageProcessor.next_due``).
         self.next_image_due_s = -np.inf
         self.last_applied_image_s = -np.inf
-        #: Updated after every applied image (``core/health.py``).
+        #: Updated after every applied image (``core/robustness/health.py``).
         self.health = TrackerHealth()
         self.last_result: CPFResult | None = None
         self.num_images_applied = 0
@@ -95,7 +95,7 @@ class Tracker:
     def add_reading(self, t: float, robot_reading: np.ndarray) -> None:
         """An encoder reading of the robot joints (``model.robot_joint_names`` order),
         stamped ``t`` (s). Raises ValueError for a wrong length. A reading with a value or
-        stamp that is not usable is skipped with a warning (``core/timestamps.py``): one
+        stamp that is not usable is skipped with a warning (``core/sensors/timestamps.py``): one
         per run of non-finite values, rate-limited for stamps."""
         try:
             t = float(t)
@@ -126,10 +126,10 @@ class Tracker:
         millimetres with 0 and 65535 for no return); True when it was applied.
 
         Images before the first reading, with a stamp the time-stamp policy rejects
-        (``core/timestamps.py``), older than the buffer horizon, from the future, in a gap
+        (``core/sensors/timestamps.py``), older than the buffer horizon, from the future, in a gap
         of the readings, not due yet (``min_image_interval_s``) or without a valid pixel
         are skipped, with a rate-limited warning for all but the not-due ones. A
-        malformed image, or one not in metres (``core/depth_units.py``), raises
+        malformed image, or one not in metres (``core/sensors/depth_units.py``), raises
         ValueError.
         """
         if frame.is_empty:

@@ -27,10 +27,10 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_tracker.demo import DEFAULT_SCENARIO, render_what_the_tracker_reads
+from drake_tracker.demo.run import DEFAULT_SCENARIO, render_what_the_tracker_reads
 from drake_tracker.metrics import pose_errors
-from drake_tracker.params import load_tracker_params
-from drake_tracker.sim.scenario import load_scenario
+from drake_tracker.params.tracker_params import load_tracker_params
+from drake_tracker.sim.scenario.load import load_scenario
 from drake_tracker.sim.world import AddSimulatedWorld
 from drake_tracker.systems.add_tracker import AddTracker
 

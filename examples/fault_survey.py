@@ -16,7 +16,7 @@ each outcome into one class:
     python examples/fault_survey.py          # prints the table and the counts (~1-2 min)
 
 Every tracker case starts from a copy of one tracker that has tracked 0.3 s of a
-synthetic run (``drake_tracker.synthetic``), applies its fault, then feeds the run's next
+synthetic run (``drake_tracker.io.synthetic``), applies its fault, then feeds the run's next
 good readings and image: they must be used, and the estimate must be finite.
 """
 
@@ -32,12 +32,12 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.io.replay import replay_run
+from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.metrics import pose_errors
-from drake_tracker.offline import replay_run
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 from drake_tracker.tracker import Tracker
 
 CLEAR_ERRORS = (ValueError, FileNotFoundError)

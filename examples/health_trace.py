@@ -19,10 +19,10 @@ import argparse
 
 import numpy as np
 
-from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.evaluation.tasks import QUICK_IMAGE_INTERVAL_S, protocol_params
-from drake_tracker.offline import model_for_run, replay_run
-from drake_tracker.recording import RecordedRun
+from drake_tracker.io.recording import RecordedRun
+from drake_tracker.io.replay import model_for_run, replay_run
 from drake_tracker.tracker import Tracker
 
 

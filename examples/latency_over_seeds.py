@@ -16,11 +16,11 @@ import copy
 
 import numpy as np
 
-from drake_tracker.demo import DEFAULT_SCENARIO, render_what_the_tracker_reads
+from drake_tracker.demo.run import DEFAULT_SCENARIO, render_what_the_tracker_reads
 from drake_tracker.metrics import pose_errors
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.sim.record import simulate_and_record
-from drake_tracker.sim.scenario import load_scenario
+from drake_tracker.sim.scenario.load import load_scenario
 from drake_tracker.systems.add_tracker import AddTracker
 
 PERCENTILES = (50, 75, 99)

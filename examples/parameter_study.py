@@ -1,5 +1,5 @@
 """Replays one recorded run with variants of the tracker's parameters and prints the
-hand-pose errors: the evidence behind the defaults in ``drake_tracker/params.py``
+hand-pose errors: the evidence behind the defaults in ``drake_tracker/params/tracker_params.py``
 (see ``docs/defaults.md``).
 
     drake-tracker record --scenario s-full-arm/constant --out runs/default.npz
@@ -18,10 +18,10 @@ import time
 
 from pydrake.common.yaml import yaml_load
 
+from drake_tracker.io.recording import RecordedRun
+from drake_tracker.io.replay import encoders_only_X_CE, model_for_run, replay_run
 from drake_tracker.metrics import percentile_summary, pose_errors
-from drake_tracker.offline import encoders_only_X_CE, model_for_run, replay_run
-from drake_tracker.params import TrackerParams, validate_tracker_params
-from drake_tracker.recording import RecordedRun
+from drake_tracker.params.tracker_params import TrackerParams, validate_tracker_params
 
 
 def truncate(run: RecordedRun, duration_s: float) -> RecordedRun:

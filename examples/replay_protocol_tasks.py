@@ -27,7 +27,7 @@ from drake_tracker.evaluation.tasks import (
     SETTLE_S,
     evaluate_run,
 )
-from drake_tracker.recording import RecordedRun
+from drake_tracker.io.recording import RecordedRun
 
 FAR_MM = 200.0
 

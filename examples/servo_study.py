@@ -28,8 +28,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import MatrixGain
 
-from drake_tracker.demo import render_what_the_tracker_reads
-from drake_tracker.params import TrackerParams
+from drake_tracker.demo.run import render_what_the_tracker_reads
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.servo.config import FEEDBACK_LABELS, FEEDBACKS, ServoStudyConfig
 from drake_tracker.servo.controller import CameraFrameServo
 from drake_tracker.servo.feedback import EncoderKinematicsPose, HealthToUsable

@@ -50,9 +50,9 @@ from drake_tracker import (
     TrackerSystems,
     build_tracker_model,
 )
-from drake_tracker.robot import add_robot
+from drake_tracker.robot.model import add_robot
 from drake_tracker.sim.encoders import BiasedEncoders
-from drake_tracker.sim.scenario import EncoderConfig
+from drake_tracker.sim.scenario.load import EncoderConfig
 
 
 @dataclass

@@ -34,8 +34,8 @@ from drake_tracker import (
     build_tracker_model,
     default_home_positions,
 )
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.renderer import make_renderer, random_configurations
+from drake_tracker.core.render.backends import make_renderer, random_configurations
+from drake_tracker.core.sensors.camera import CameraIntrinsics
 
 PANDA_URDF = "package://example-robot-data/robots/panda_description/urdf/panda.urdf"
 PANDA_ARM = [f"panda_joint{k}" for k in range(1, 8)]
@@ -83,8 +83,8 @@ def render_agreement(config: RobotConfig) -> None:
 def cost_against_apollo(config: RobotConfig) -> None:
     """µs per likelihood evaluation in the image update, this robot's and the bench
     robot's, timed in turns as ``drake-tracker bench`` does (1 thread)."""
-    from drake_tracker.bench_likelihood import kernel_us_per_evaluation_in_turns
-    from drake_tracker.robot import robot_preset
+    from drake_tracker.bench.likelihood import kernel_us_per_evaluation_in_turns
+    from drake_tracker.robot.model import robot_preset
 
     models = {"apollo": build_tracker_model(robot_preset("apollo")),
               "this robot": build_tracker_model(config)}

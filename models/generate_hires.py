@@ -1,6 +1,6 @@
 """Writes a robot with CAD-like meshes: Apollo with every visual an OBJ mesh.
 
-For the likelihood's level-of-detail tests and the bench (``drake_tracker.hires_robot``):
+For the likelihood's level-of-detail tests and the bench (``drake_tracker.robot.hires``):
 the same links, joints, frames and shape poses as ``apollo.sdf``
 (``generate_models.apollo_sdf``), with cylinders and spheres finely tessellated and
 boxes with rounded edges, as a CAD export gives them. Nothing is committed as files:
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from drake_tracker.models.generate_models import apollo_sdf
 
-from drake_tracker.core.geometry import cylinder_mesh, sphere_mesh
+from drake_tracker.core.render.meshes import cylinder_mesh, sphere_mesh
 
 
 def _rounded_box_mesh(size, fillet: float, steps: int):

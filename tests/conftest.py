@@ -2,7 +2,7 @@
 
 import pytest
 
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 @pytest.fixture(scope="session")

@@ -1,6 +1,6 @@
 """Tracker parameters that keep unit tests fast (shared by the test modules)."""
 
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 
 
 def small_params() -> TrackerParams:

@@ -4,7 +4,7 @@ asserted (performance is the bench's to measure, not the tests')."""
 
 import json
 
-from drake_tracker.cli import main
+from drake_tracker.cli.main import main
 
 
 def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):

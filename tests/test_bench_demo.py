@@ -5,17 +5,17 @@ import math
 
 import pytest
 
-from drake_tracker.bench import (
+from drake_tracker.bench.readings import bench_reading_path, format_reading_path
+from drake_tracker.bench.run import (
     bench_demo,
     bench_tracker_alone,
     format_demo,
     format_tracker_alone,
     record_demo_sensors,
 )
-from drake_tracker.bench_readings import bench_reading_path, format_reading_path
-from drake_tracker.core.camera import stride_for_width
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model
+from drake_tracker.core.sensors.camera import stride_for_width
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model
 
 
 def test_bench_demo_reports_its_real_time_factors():

@@ -3,10 +3,10 @@ assertions: only that the figures exist, are positive, and the renderings agree)
 
 import numpy as np
 
-from drake_tracker.bench_likelihood import bench_robot
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.bench.likelihood import bench_robot
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 def test_bench_robot_reports_its_figures():
@@ -30,7 +30,7 @@ def test_kernel_cost_in_turns_is_per_evaluation_for_each_robot():
     CAD ÷ bench ratio of ``bench.json``); the thread count is restored afterwards."""
     import numba
 
-    from drake_tracker.bench_likelihood import kernel_us_per_evaluation_in_turns
+    from drake_tracker.bench.likelihood import kernel_us_per_evaluation_in_turns
 
     models = {name: build_tracker_model(robot_preset(name)) for name in ("apollo", "arm6")}
     camera = CameraIntrinsics.from_fov(640, 480, np.radians(45.0))

@@ -10,8 +10,8 @@ reading's stamp and delivered 50-90 ms later, some out of order.
 
 import numpy as np
 
-from drake_tracker.core.belief_buffer import BeliefBuffer
-from drake_tracker.core.kalman import (
+from drake_tracker.core.filter.belief_buffer import BeliefBuffer
+from drake_tracker.core.filter.kalman import (
     COV_AB,
     MEAN_A,
     MEAN_B,

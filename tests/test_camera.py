@@ -3,9 +3,9 @@ intrinsics equals its full-resolution render subsampled."""
 
 import numpy as np
 
-from drake_tracker.core.camera import CameraIntrinsics, subsample
-from drake_tracker.core.renderer import default_view_configuration, make_renderer
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.sensors.camera import CameraIntrinsics, subsample
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 def test_subsampled_intrinsics_match_subsampled_drake_render():

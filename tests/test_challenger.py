@@ -1,5 +1,5 @@
 """The challenger belief: a search from the encoders' arm kept over images while the
-estimate's biases are implausible (``core/second_opinion.py``).
+estimate's biases are implausible (``core/robustness/second_opinion.py``).
 
 Measured on the protocol's occlusion/time-varying seed 0: the estimate held joints 3-4
 at biases of 30-55 deg (the bias model's spread is 10.3 deg), 100-570 mm off, and no
@@ -14,15 +14,20 @@ from fast_params import small_params
 from test_restart import CAMERA, assert_restarts_alike_offline_and_in_the_diagram, hand_error_mm
 from test_second_opinion import prior_at, scene  # noqa: F401  (the fixture)
 
-from drake_tracker.core.health import Challenger, HealthParams, TrackerHealth, next_health
-from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A
-from drake_tracker.core.pipeline import ImageProcessor, full_reading
-from drake_tracker.core.second_opinion import (
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A
+from drake_tracker.core.image_step import ImageProcessor, full_reading
+from drake_tracker.core.robustness.health import (
+    Challenger,
+    HealthParams,
+    TrackerHealth,
+    next_health,
+)
+from drake_tracker.core.robustness.second_opinion import (
     challenger_prior,
     implausible_biases,
     plausible_bias_std,
 )
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 
 #: A bend far beyond the bias model (23 deg is the default's trigger).
 BEND_DEG = {"arm_joint_4": 40.0}

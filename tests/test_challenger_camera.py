@@ -19,14 +19,14 @@ import pytest
 from test_restart import CAMERA, hand_error_mm
 from test_second_opinion import ENCODER_BIAS_DEG
 
-from drake_tracker.core.angle_observation import Restart
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.health import TrackerHealth, next_health
-from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.core.renderer import default_view_configuration, make_renderer
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.filter.angle_observation import Restart
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
+from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.robustness.health import TrackerHealth, next_health
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 #: The true camera offset (m, m, m, rad, rad, rad): a mount 10 cm and 4.6 deg off, 5-8
 #: times the initial spread of the virtual joints (1 cm, 0.01 rad).

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from drake_tracker.cli import main
-from drake_tracker.cli_args import UsageError, scenario_name
-from drake_tracker.params import TrackerParams, load_tracker_params
-from drake_tracker.sim.scenario import ALL_SEQUENCES, BIAS_VARIANTS, list_presets
+from drake_tracker.cli.args import UsageError, scenario_name
+from drake_tracker.cli.main import main
+from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
+from drake_tracker.sim.scenario.load import ALL_SEQUENCES, BIAS_VARIANTS, list_presets
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -190,7 +190,7 @@ def test_the_top_level_help_is_for_users(capsys):
 def test_a_missing_graphviz_is_a_one_line_note(tmp_path, capsys, monkeypatch):
     import shutil
 
-    from drake_tracker.demo import write_diagram
+    from drake_tracker.demo.run import write_diagram
 
     monkeypatch.setattr(shutil, "which", lambda name: None)
     assert write_diagram("digraph {}", tmp_path) is None

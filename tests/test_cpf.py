@@ -3,15 +3,19 @@
 import numpy as np
 import pytest
 
-from drake_tracker.core.angle_observation import AngleObservation
-from drake_tracker.core.cpf import (
+from drake_tracker.core.cpf.particle_filter import (
     annealed_coordinate_particle_filter,
     coordinate_particle_filter,
     kl_from_uniform,
 )
-from drake_tracker.core.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.likelihood import LikelihoodParams, log_likelihoods, prepare_observation
-from drake_tracker.params import TrackerParams
+from drake_tracker.core.filter.angle_observation import AngleObservation
+from drake_tracker.core.filter.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.likelihood.pixel_model import (
+    LikelihoodParams,
+    log_likelihoods,
+    prepare_observation,
+)
+from drake_tracker.params.tracker_params import TrackerParams
 
 PARAMS = LikelihoodParams(
     depth_noise_std_m=0.05, depth_noise_factor_per_m=0.0, occlusion_probability=0.2

@@ -1,17 +1,17 @@
-"""The CPF's block loop in numba (core/cpf_compiled.py) against the Python sweep it
+"""The CPF's block loop in numba (core/cpf/compiled.py) against the Python sweep it
 replaces: the same random draws, the same particles, the same result."""
 
 import numpy as np
 import pytest
 
-from drake_tracker.bench_likelihood import make_update, tracking_prior
-from drake_tracker.bench_likelihood import test_observation as bench_observation
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.cpf import annealed_coordinate_particle_filter
-from drake_tracker.core.cpf_compiled import CompiledLikelihood, compiled_sweep
-from drake_tracker.core.kalman import MEAN_A, VAR_A
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.bench.likelihood import make_update, tracking_prior
+from drake_tracker.bench.likelihood import test_observation as bench_observation
+from drake_tracker.core.cpf.compiled import CompiledLikelihood, compiled_sweep
+from drake_tracker.core.cpf.particle_filter import annealed_coordinate_particle_filter
+from drake_tracker.core.filter.kalman import MEAN_A, VAR_A
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 CAMERA = CameraIntrinsics.from_fov(640, 480, np.radians(45.0))
 
@@ -58,7 +58,7 @@ def test_compiled_sweeps_give_the_python_sweeps_result(update, jumps):
 def test_the_image_update_runs_compiled_sweeps_with_the_python_result(update):
     """CpfImageUpdate with its batched renderer (compiled sweeps) against the same
     update through a wrapper renderer (the Python sweeps), coarse sweeps included."""
-    from drake_tracker.core.image_update import CpfImageUpdate
+    from drake_tracker.core.cpf.image_update import CpfImageUpdate
 
     params = TrackerParams().image
     coarse = CpfImageUpdate(update.model, CAMERA, update.blocks, 10, params.likelihood, 80,

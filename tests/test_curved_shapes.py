@@ -24,7 +24,7 @@ from pydrake.multibody.tree import SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo
 
-from drake_tracker.core.geometry import tessellate_shape
+from drake_tracker.core.render.meshes import tessellate_shape
 from drake_tracker.sim.curved_shapes import (
     segments_for,
     sphere_deviation,

@@ -12,8 +12,8 @@ import struct
 
 import pytest
 
-from drake_tracker.cli import main
-from drake_tracker.visualization import ENCODERS_RGBA, ESTIMATE_RGBA
+from drake_tracker.cli.main import main
+from drake_tracker.demo.meshcat_views import ENCODERS_RGBA, ESTIMATE_RGBA
 
 ROBOT_PATHS = ("/drake/truth", "/drake/encoders_only", "/drake/estimate")
 

@@ -4,10 +4,10 @@ import numba
 import numpy as np
 import pytest
 
-from drake_tracker.offline import replay_run
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.io.replay import replay_run
+from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="needs 2 numba threads")

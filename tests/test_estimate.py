@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform
 
-from drake_tracker.core.estimate import PoseReadout
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.filter.estimate import PoseReadout
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 @pytest.fixture(scope="module")
@@ -47,8 +47,8 @@ def test_the_readout_loads_its_kernel_when_made_and_a_context_adds_no_signature(
     """A Diagram's first hand pose must not stall the Simulator on numba's cache: the
     kernel is loaded when the readout is made, and a Context's read-only state reaches
     it with the same signature as an array of one's own."""
-    from drake_tracker.core.kinematics import relative_poses_one
-    from drake_tracker.params import TrackerParams
+    from drake_tracker.core.render.kinematics import relative_poses_one
+    from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
 
     bank = JointKalmanBankSystem(apollo, TrackerParams(), period_s=1e-3)

@@ -17,9 +17,9 @@ from drake_tracker.evaluation import (
     task_base_params,
     write_summary,
 )
-from drake_tracker.methods import METHODS, method_params
-from drake_tracker.robot import build_tracker_model, robot_preset
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.evaluation.methods import METHODS, method_params
+from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 def test_methods_are_configurations_of_one_tracker():
@@ -60,7 +60,7 @@ def test_evaluate_run_orders_the_methods_on_a_biased_run():
 
 
 def test_the_task_seed_reaches_the_tracker(monkeypatch):
-    import drake_tracker.offline as offline
+    import drake_tracker.io.replay as offline
 
     seen = []
 
@@ -71,7 +71,7 @@ def test_the_task_seed_reaches_the_tracker(monkeypatch):
     monkeypatch.setattr(offline, "replay_run", fake_replay)
     model = build_tracker_model(robot_preset("apollo"))
     run = synthetic_run(model, duration_s=0.2, bias_rad=0.0, seed=1)
-    from drake_tracker.params import TrackerParams
+    from drake_tracker.params.tracker_params import TrackerParams
 
     base = TrackerParams()
     base.image.seed = 40
@@ -186,7 +186,7 @@ def test_a_finished_task_is_not_run_again(tmp_path):
 
 
 def test_a_parameter_file_reaches_every_task(tmp_path):
-    from drake_tracker.params import load_tracker_params, tracker_params_to_yaml
+    from drake_tracker.params.tracker_params import load_tracker_params, tracker_params_to_yaml
 
     path = tmp_path / "single.yaml"
     path.write_text("image:\n  annealing_betas: [1.0]\n  num_particles: 200\n")
@@ -249,7 +249,7 @@ def test_summary_skips_the_settling_time():
 
 
 def test_the_command_rejects_unknown_names_and_bad_settling(tmp_path):
-    from drake_tracker.cli import main
+    from drake_tracker.cli.main import main
 
     out = str(tmp_path / "out")
     with pytest.raises(SystemExit, match="unknown sequence 'nope'"):

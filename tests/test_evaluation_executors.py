@@ -112,7 +112,7 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
     marker = f"DRAKE_TRACKER_TEST_MARKER={uuid.uuid4().hex}"
     env = {**os.environ, marker.split("=")[0]: marker.split("=")[1]}
     out = tmp_path / "out"
-    command = [sys.executable, "-m", "drake_tracker.cli", "evaluate", "--quick",
+    command = [sys.executable, "-m", "drake_tracker.cli.main", "evaluate", "--quick",
                "--sequences", "s-full-arm", "--methods", "encoders_only", "--seeds", "1",
                "--duration", "1", "--settle-s", "0.5", "--workers", "2", "--out", str(out)]
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE,
@@ -145,7 +145,7 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
 
 
 def test_the_ray_executor_without_ray_says_how_to_install_it(tmp_path, monkeypatch):
-    from drake_tracker.cli import main
+    from drake_tracker.cli.main import main
 
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray fails
     out = tmp_path / "out"

@@ -48,13 +48,13 @@ import numpy as np
 import pytest
 from fast_params import small_params
 
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.demo import DEFAULT_SCENARIO, render_what_the_tracker_reads
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.demo.run import DEFAULT_SCENARIO, render_what_the_tracker_reads
+from drake_tracker.io.replay import encoders_only_X_CE
 from drake_tracker.metrics import pose_errors
-from drake_tracker.offline import encoders_only_X_CE
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.sim.record import simulate_and_record
-from drake_tracker.sim.scenario import load_scenario
+from drake_tracker.sim.scenario.load import load_scenario
 from drake_tracker.tracker import Tracker
 
 FAULT_START_S = 2.0

@@ -10,14 +10,14 @@ import pytest
 from fast_params import small_params
 from pydrake.systems.analysis import Simulator
 
-from drake_tracker.core.belief_buffer import ImageAnchor
-from drake_tracker.core.depth_units import depth_units_problem
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.image_update import RECENT_UPDATES, StageTimes
-from drake_tracker.core.pipeline import make_bank_and_prior
-from drake_tracker.offline import replay_run
-from drake_tracker.params import TrackerParams, validate_tracker_params
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.core.cpf.image_update import RECENT_UPDATES, StageTimes
+from drake_tracker.core.filter.belief_buffer import ImageAnchor
+from drake_tracker.core.image_step import make_bank_and_prior
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.core.sensors.depth_units import depth_units_problem
+from drake_tracker.io.replay import replay_run
+from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import TrackerParams, validate_tracker_params
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
 from drake_tracker.systems.messages import ImagePrior
 from drake_tracker.tracker import Tracker

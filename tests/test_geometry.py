@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from drake_tracker.core import geometry
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.render import meshes as geometry
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 def _volume(v, t):

@@ -4,8 +4,8 @@ that the filter re-acquires (with bias jumps) or reports as lost (without)."""
 import numpy as np
 import pytest
 
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.health import (
+from drake_tracker.core.likelihood.pixel_model import LikelihoodParams
+from drake_tracker.core.robustness.health import (
     HealthParams,
     HealthState,
     ImageConsistency,
@@ -14,10 +14,10 @@ from drake_tracker.core.health import (
     next_health,
     shows_no_arm,
 )
-from drake_tracker.core.likelihood import LikelihoodParams
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.metrics import pose_errors
-from drake_tracker.params import TrackerParams
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.tracker import Tracker
 
 
@@ -57,7 +57,7 @@ def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
     """While a challenger is out (the estimate's biases are implausible), images that
     agree with the estimate report ``uncertain``; every other field, and the states
     once it is gone, are those of the same images without it."""
-    from drake_tracker.core.health import Challenger
+    from drake_tracker.core.robustness.health import Challenger
 
     p = HealthParams(min_robot_pixels=10, lost_after_images=2, recovered_after_images=2)
     good = ImageConsistency(0.0, 100, 0.9, 0.02)

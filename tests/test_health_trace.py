@@ -6,9 +6,9 @@ import numpy as np
 from example_modules import load_example
 
 from drake_tracker.evaluation.tasks import protocol_params
-from drake_tracker.offline import replay_run
-from drake_tracker.recording import RecordedRun
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.io.recording import RecordedRun
+from drake_tracker.io.replay import replay_run
+from drake_tracker.io.synthetic import synthetic_run
 
 
 def test_the_image_callback_sees_every_image_and_changes_no_estimate(apollo):

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.jump_visibility import changed_visible_pixels, jump_testable
-from drake_tracker.core.likelihood import LikelihoodParams
-from drake_tracker.core.renderer import default_view_configuration, make_renderer
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.likelihood.pixel_model import LikelihoodParams
+from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.robustness.jump_visibility import changed_visible_pixels, jump_testable
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 PARAMS = LikelihoodParams()
@@ -37,7 +37,7 @@ def test_changed_pixels_count_only_what_the_image_sees():
 
 def _changed_numpy(base_m, moved_m, observed_m, params, occluders=True):
     """The former whole-image numpy count: the reference for the compiled one."""
-    from drake_tracker.core.likelihood import pixel_sigma, valid_pixels
+    from drake_tracker.core.likelihood.pixel_model import pixel_sigma, valid_pixels
 
     base = np.asarray(base_m, float)[None]
     moved = np.asarray(moved_m, float)

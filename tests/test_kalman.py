@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from drake_tracker.core.kalman import (
+from drake_tracker.core.filter.kalman import (
     COV_AB,
     MEAN_A,
     MEAN_B,

@@ -4,9 +4,9 @@ against Drake's forward kinematics, a correction adopted, a NaN reading skipped.
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from drake_tracker.core.kalman import MEAN_A, JointKalmanBank
-from drake_tracker.core.pipeline import full_reading, make_bank_and_prior
-from drake_tracker.params import TrackerParams, resolve_kalman_params
+from drake_tracker.core.filter.kalman import MEAN_A, JointKalmanBank
+from drake_tracker.core.image_step import full_reading, make_bank_and_prior
+from drake_tracker.params.tracker_params import TrackerParams, resolve_kalman_params
 from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
 from drake_tracker.systems.messages import BeliefCorrection
 

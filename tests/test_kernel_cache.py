@@ -1,7 +1,7 @@
 """numba's cache of the kernels is emptied when any source of the folder changes
-(core/kernel_cache.py): numba itself only checks each function's own file."""
+(core/jit/kernel_cache.py): numba itself only checks each function's own file."""
 
-from drake_tracker.core.kernel_cache import clear_stale_kernel_cache, sources_hash
+from drake_tracker.core.jit.kernel_cache import clear_stale_kernel_cache, sources_hash
 
 
 def test_a_changed_source_empties_the_folder_cache(tmp_path):

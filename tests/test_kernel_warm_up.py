@@ -5,11 +5,12 @@ import sys
 
 CHECK = """
 import numpy as np
-from drake_tracker.core import cpf_compiled, occlusion
-from drake_tracker.core.camera import CameraIntrinsics
+from drake_tracker.core.cpf import compiled as cpf_compiled
+from drake_tracker.core.likelihood import occlusion
+from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.kernel_warm_up import warm_up_tracker_kernels
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 kernels = (cpf_compiled._sweep, occlusion._surface_steps)
 before = [bool(k.signatures) for k in kernels]

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from pydrake.multibody.tree import BodyIndex, JointIndex
 
-from drake_tracker.core.kinematics import BatchedKinematics
-from drake_tracker.robot import VIRTUAL_JOINT_NAMES, build_tracker_model, robot_preset
+from drake_tracker.core.render.kinematics import BatchedKinematics
+from drake_tracker.robot.model import VIRTUAL_JOINT_NAMES, build_tracker_model, robot_preset
 
 
 def random_configurations(model, num: int, rng: np.random.Generator) -> np.ndarray:

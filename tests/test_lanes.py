@@ -1,4 +1,4 @@
-"""SIMD across particles (core/lanes.py, lane_render.py, simd_ir.py, simd_f32.py) against
+"""SIMD across particles (core/simd/lanes.py, lane_render.py, simd_ir.py, simd_f32.py) against
 plain references: libm's exp, log and erfc, and the scalar rasteriser's images."""
 
 import math
@@ -8,13 +8,13 @@ import pytest
 from numba import njit, types
 from numba.extending import intrinsic
 
-from drake_tracker.core import simd_f32
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.lane_render import lane_scratch, render_lanes
-from drake_tracker.core.lanes import LANES
-from drake_tracker.core.render_batched import BatchedDepthRenderer
-from drake_tracker.core.renderer import default_view_configuration, random_configurations
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.render.backends import default_view_configuration, random_configurations
+from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.simd import ir_f32 as simd_f32
+from drake_tracker.core.simd.lane_render import lane_scratch, render_lanes
+from drake_tracker.core.simd.lanes import LANES
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 def _vector_map_f32(emit):
@@ -140,8 +140,8 @@ def test_lane_forward_kinematics_is_the_scalar_one_bit_for_bit(robot):
     """lane_relative_poses against BatchedKinematics.relative_poses (kinematics.py's
     relative_poses_one per particle), a full batch and a short one (lanes past the
     count repeat the last configuration)."""
-    from drake_tracker.core.kinematics import BatchedKinematics
-    from drake_tracker.core.lane_kinematics import lane_relative_poses
+    from drake_tracker.core.render.kinematics import BatchedKinematics
+    from drake_tracker.core.simd.lane_kinematics import lane_relative_poses
 
     model = build_tracker_model(robot_preset(robot))
     kinematics = BatchedKinematics.from_plant(model.plant)
@@ -165,8 +165,8 @@ def test_the_kept_workspace_is_left_clear_between_calls():
     """The scoring kernel's z-buffers and spans, kept by the renderer between calls, are
     all zeros and empty after every call (the kernel clears what it drew, the torso's
     clipped triangles included), so each call scores as a fresh workspace would."""
-    from drake_tracker.core.likelihood import LikelihoodParams, prepare_observation
-    from drake_tracker.core.renderer import synthetic_observation
+    from drake_tracker.core.likelihood.pixel_model import LikelihoodParams, prepare_observation
+    from drake_tracker.core.render.backends import synthetic_observation
 
     model = build_tracker_model(robot_preset("apollo"))
     renderer = BatchedDepthRenderer(model, CameraIntrinsics.from_fov(80, 60, np.radians(45)))

@@ -4,16 +4,16 @@ full meshes, and the simplification's geometric tolerance."""
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.geometry import sphere_mesh
-from drake_tracker.core.level_of_detail import LevelOfDetail, cluster_mesh, edges_balanced
-from drake_tracker.core.render_batched import BatchedDepthRenderer
-from drake_tracker.core.renderer import (
+from drake_tracker.core.render.backends import (
     default_view_configuration,
     make_renderer,
     random_configurations,
 )
-from drake_tracker.hires_robot import SMALL_TESSELLATION, hires_apollo_model
+from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.render.level_of_detail import LevelOfDetail, cluster_mesh, edges_balanced
+from drake_tracker.core.render.meshes import sphere_mesh
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.hires import SMALL_TESSELLATION, hires_apollo_model
 
 FULL = CameraIntrinsics.from_fov(640, 480, np.radians(45))
 
@@ -44,17 +44,17 @@ def test_level_of_detail_matches_drake_vtk_on_cad_meshes(model, stride):
 
 
 def test_the_likelihood_path_scores_the_images_that_match_drake_vtk(model):
-    """The image update's likelihood path (8 particles at a time, core/lane_render.py)
+    """The image update's likelihood path (8 particles at a time, core/simd/lane_render.py)
     on the CAD robot scores exactly the images compared with RenderEngineVtk above:
     its scores equal the plain likelihood of those images (to the float32 terms' stated
     tolerance)."""
-    from drake_tracker.core.lane_likelihood import SCORE_ATOL_PER_PIXEL
-    from drake_tracker.core.likelihood import (
+    from drake_tracker.core.likelihood.pixel_model import (
         LikelihoodParams,
         log_likelihoods,
         prepare_observation,
     )
-    from drake_tracker.core.renderer import synthetic_observation
+    from drake_tracker.core.render.backends import synthetic_observation
+    from drake_tracker.core.simd.lane_likelihood import SCORE_ATOL_PER_PIXEL
 
     renderer = BatchedDepthRenderer(model, FULL.subsampled(8))
     center = default_view_configuration(model)
@@ -97,7 +97,7 @@ def test_edges_balanced_detects_an_open_mesh():
 
 
 def test_primitive_robots_keep_their_meshes():
-    from drake_tracker.robot import build_tracker_model, robot_preset
+    from drake_tracker.robot.model import build_tracker_model, robot_preset
 
     apollo = build_tracker_model(robot_preset("apollo"))
     renderer = BatchedDepthRenderer(apollo, FULL.subsampled(8))

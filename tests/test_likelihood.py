@@ -5,7 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from drake_tracker.core.likelihood import LikelihoodParams, log_likelihoods, prepare_observation
+from drake_tracker.core.likelihood.pixel_model import (
+    LikelihoodParams,
+    log_likelihoods,
+    prepare_observation,
+)
 
 PARAMS = LikelihoodParams(
     tail_weight=0.02,
@@ -129,14 +133,14 @@ def test_lane_pixel_scores_equal_the_scalar_formula(occluder_depth):
     of the observation) and lanes with nothing rendered."""
     from numba import njit
 
-    from drake_tracker.core.lane_likelihood import (
+    from drake_tracker.core.simd.lane_likelihood import (
         PIXELS_PER_CALL,
         TERM_ATOL_F32,
         TERM_RTOL_F32,
         lane_pixel_scores,
         lane_pixel_scores_truncated,
     )
-    from drake_tracker.core.lanes import LANES
+    from drake_tracker.core.simd.lanes import LANES
 
     @njit
     def score(zb, offsets, pixels, acc, table, uniform, lam, occlusion, truncation):

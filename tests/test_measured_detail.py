@@ -1,4 +1,4 @@
-"""The measured level of detail (core/measured_detail.py): the choice of options on
+"""The measured level of detail (core/render/measured_detail.py): the choice of options on
 numbers against brute force, and on a robot with an open mesh (a cup the camera looks
 into, where back-face culling would show the background through it) against Drake's
 RenderEngineVtk."""
@@ -8,13 +8,13 @@ import itertools
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.geometry import cylinder_mesh, sphere_mesh
-from drake_tracker.core.level_of_detail import LevelOfDetail
-from drake_tracker.core.measured_detail import choose_options, wrong_pixels
-from drake_tracker.core.render_batched import BatchedDepthRenderer
-from drake_tracker.core.renderer import make_renderer, random_configurations
-from drake_tracker.robot import (
+from drake_tracker.core.render.backends import make_renderer, random_configurations
+from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.render.level_of_detail import LevelOfDetail
+from drake_tracker.core.render.measured_detail import choose_options, wrong_pixels
+from drake_tracker.core.render.meshes import cylinder_mesh, sphere_mesh
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.model import (
     VIRTUAL_JOINT_NAMES,
     FrameOffset,
     RobotConfig,
@@ -98,8 +98,8 @@ def test_culling_is_kept_off_where_the_camera_sees_into_an_open_mesh(cup_model):
     # The control: culling the cup would show what is behind it.
     culled = BatchedDepthRenderer(cup_model, INTRINSICS, detail=None)
     culled.meshes.triangle_closed[:] = True
-    from drake_tracker.core.lane_render import lane_tables
-    from drake_tracker.core.mesh_parts import render_tables
+    from drake_tracker.core.render.mesh_parts import render_tables
+    from drake_tracker.core.simd.lane_render import lane_tables
     culled._tables = render_tables(culled.meshes, culled.kinematics.num_bodies)
     culled._lane_tables = lane_tables(culled._tables)
     assert wrong_pixels(culled.render(q), ref, 0.03).sum() > 0.05 * hit_ref.sum()

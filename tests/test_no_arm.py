@@ -15,10 +15,10 @@ import numpy as np
 from fast_params import small_params
 from test_timestamps import assert_same_when_settled, feed, simulate
 
-from drake_tracker.core.estimate import PoseReadout
-from drake_tracker.core.health import HealthState
+from drake_tracker.core.filter.estimate import PoseReadout
+from drake_tracker.core.robustness.health import HealthState
+from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.metrics import pose_errors
-from drake_tracker.synthetic import synthetic_run
 from drake_tracker.tracker import Tracker
 
 NO_ARM_FROM_S, NO_ARM_TO_S = 0.9, 1.2

@@ -4,7 +4,7 @@ import numba
 import numpy as np
 import pytest
 
-from drake_tracker.core.numba_threading import (
+from drake_tracker.core.jit.numba_threading import (
     DEFAULT_THREADING_LAYER,
     SerialOrParallel,
     configure_threading_layer,
@@ -69,16 +69,16 @@ def test_one_thread_is_always_serial():
 
 
 def test_serial_and_parallel_kernels_give_identical_scores():
-    from drake_tracker.core.camera import CameraIntrinsics
-    from drake_tracker.core.likelihood import LikelihoodParams, prepare_observation
-    from drake_tracker.core.render_batched import BatchedDepthRenderer
-    from drake_tracker.core.render_likelihood import fused_scores
-    from drake_tracker.core.renderer import (
+    from drake_tracker.core.likelihood.pixel_model import LikelihoodParams, prepare_observation
+    from drake_tracker.core.render.backends import (
         default_view_configuration,
         random_configurations,
         synthetic_observation,
     )
-    from drake_tracker.robot import build_tracker_model, robot_preset
+    from drake_tracker.core.render.batched import BatchedDepthRenderer
+    from drake_tracker.core.render.fused_score import fused_scores
+    from drake_tracker.core.sensors.camera import CameraIntrinsics
+    from drake_tracker.robot.model import build_tracker_model, robot_preset
 
     model = build_tracker_model(robot_preset("apollo"))
     renderer = BatchedDepthRenderer(model, CameraIntrinsics.from_fov(80, 60, np.radians(45)))
@@ -107,7 +107,7 @@ import sys
 import numpy as np
 from numba import get_thread_id, prange, set_num_threads
 sys.path.insert(0, sys.argv[1])
-from drake_tracker.core.numba_threading import serial_and_parallel
+from drake_tracker.core.jit.numba_threading import serial_and_parallel
 
 def thread_ids(out):
     for i in prange(out.shape[0]):
@@ -146,7 +146,7 @@ def test_the_parallel_compilation_stays_parallel_when_loaded_from_the_cache(tmp_
 
 
 def test_the_scoring_kernels_have_cache_files_of_their_own():
-    from drake_tracker.core import render_likelihood
+    from drake_tracker.core.render import fused_score as render_likelihood
 
     serial, parallel = render_likelihood._score_serial, render_likelihood._score_parallel
     assert parallel.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")

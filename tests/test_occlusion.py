@@ -4,15 +4,15 @@ seen clear and behind a large occluder, from the same prior."""
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.estimate import PoseReadout
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.core.renderer import default_view_configuration, make_renderer
+from drake_tracker.core.filter.estimate import PoseReadout
+from drake_tracker.core.filter.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
+from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.metrics import pose_errors
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 
@@ -124,7 +124,7 @@ def _steps_numpy(seed, depth, allowed, max_step, steps):
 
 @pytest.mark.parametrize("seed", range(5))
 def test_grow_surface_equals_a_breadth_first_reference(seed):
-    from drake_tracker.core.occlusion import grow_surface, surface_steps
+    from drake_tracker.core.likelihood.occlusion import grow_surface, surface_steps
 
     rng = np.random.default_rng(seed)
     depth = np.round(rng.uniform(0.4, 0.6, (12, 17)), 2)  # steps of 0.01-0.2 m
@@ -143,7 +143,7 @@ def test_grow_surface_equals_a_breadth_first_reference(seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_the_compiled_growth_equals_the_former_numpy_growth_on_image_sized_inputs(seed):
-    from drake_tracker.core.occlusion import OCCLUDER_GROWTH_PX, surface_steps
+    from drake_tracker.core.likelihood.occlusion import OCCLUDER_GROWTH_PX, surface_steps
 
     rng = np.random.default_rng(10 + seed)
     # An 80x60 scene of a few flat surfaces with noise, holes and a seed blob on one.

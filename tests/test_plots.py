@@ -9,13 +9,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from drake_tracker.plots import (  # noqa: E402
+from drake_tracker.evaluation.plot_style import (  # noqa: E402
     mark_scenario_events,
     method_label,
     plot_error_time_series,
     scenario_events,
 )
-from drake_tracker.sim.scenario import load_scenario  # noqa: E402
+from drake_tracker.sim.scenario.load import load_scenario  # noqa: E402
 
 
 def test_events_of_the_presets():

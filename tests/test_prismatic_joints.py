@@ -6,15 +6,20 @@ image update's priors and every method."""
 import numpy as np
 import pytest
 
-from drake_tracker.methods import method_params
-from drake_tracker.params import (
+from drake_tracker.evaluation.methods import method_params
+from drake_tracker.params.tracker_params import (
     JointNoise,
     TrackerParams,
     joint_noise_for,
     load_tracker_params,
     resolve_kalman_params,
 )
-from drake_tracker.robot import VIRTUAL_JOINT_NAMES, FrameOffset, RobotConfig, build_tracker_model
+from drake_tracker.robot.model import (
+    VIRTUAL_JOINT_NAMES,
+    FrameOffset,
+    RobotConfig,
+    build_tracker_model,
+)
 
 URDF = """<?xml version="1.0"?>
 <robot name="slider">
@@ -79,8 +84,8 @@ def test_a_bad_prismatic_default_is_named_at_load(tmp_path):
 
 
 def test_the_tracker_starts_with_the_metre_prior_on_the_finger(slider):
-    from drake_tracker.core.kalman import VAR_B
-    from drake_tracker.core.pipeline import make_bank_and_prior
+    from drake_tracker.core.filter.kalman import VAR_B
+    from drake_tracker.core.image_step import make_bank_and_prior
 
     _, prior = make_bank_and_prior(slider, TrackerParams(), np.array([0.3, 0.02]))
     k = slider.joint_names.index("slide")

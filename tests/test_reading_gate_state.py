@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from awkward_stamps import awkward_stamps
 
-from drake_tracker.core.reading_gate import ReadingGate
-from drake_tracker.params import TimestampParams
+from drake_tracker.core.sensors.reading_gate import ReadingGate
+from drake_tracker.params.tracker_params import TimestampParams
 
 JOINTS = ["a", "b"]
 

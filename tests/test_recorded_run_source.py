@@ -5,8 +5,8 @@ in the recording says; each image is one DepthFrame however often it is shown.""
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.recording import RecordedRun
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.io.recording import RecordedRun
 from drake_tracker.systems.recorded_run_source import RecordedRunSource
 
 

@@ -3,15 +3,15 @@
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.render_batched import BatchedDepthRenderer
-from drake_tracker.core.renderer import (
+from drake_tracker.core.render.backends import (
     benchmark_renderers,
     default_view_configuration,
     make_renderer,
     random_configurations,
 )
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 FULL = CameraIntrinsics.from_fov(640, 480, np.radians(45))
 NUM_CONFIGURATIONS = 20
@@ -88,12 +88,12 @@ def _observation_of(renderer, q_true, rng, background_m=2.5):
 
 @pytest.mark.parametrize("stride", [8, 4], ids=["80x60", "160x120"])
 def test_fused_render_likelihood_equals_render_then_likelihood(model, configurations, stride):
-    from drake_tracker.core.lane_likelihood import SCORE_ATOL_PER_PIXEL
-    from drake_tracker.core.likelihood import (
+    from drake_tracker.core.likelihood.pixel_model import (
         LikelihoodParams,
         log_likelihoods,
         prepare_observation,
     )
+    from drake_tracker.core.simd.lane_likelihood import SCORE_ATOL_PER_PIXEL
 
     renderer = BatchedDepthRenderer(model, FULL.subsampled(stride))
     rng = np.random.default_rng(3)
@@ -127,7 +127,7 @@ def test_culling_does_not_change_the_images(model):
     configurations spread widely enough to put parts out of view and near the camera."""
     from dataclasses import replace
 
-    from drake_tracker.core.mesh_parts import render_tables
+    from drake_tracker.core.render.mesh_parts import render_tables
 
     intrinsics = FULL.subsampled(8)
     culled = BatchedDepthRenderer(model, intrinsics)
@@ -145,7 +145,7 @@ def test_mesh_parts_partition_each_body_and_render_the_same_images(model):
     """Every triangle is in exactly one part, of its own body, with at most the
     requested number of triangles and a sphere that holds its vertices; the images do not
     depend on how the bodies are split."""
-    from drake_tracker.core.mesh_parts import render_tables
+    from drake_tracker.core.render.mesh_parts import render_tables
 
     renderer = BatchedDepthRenderer(model, FULL.subsampled(8))
     meshes, nb = renderer.meshes, renderer.kinematics.num_bodies
@@ -178,7 +178,7 @@ def test_small_box_rasterisation_equals_the_row_runs():
     either path give the same z-buffer and rows, and spans that cover the pixels."""
     from numba import njit
 
-    from drake_tracker.core.rasterize import _raster
+    from drake_tracker.core.render.rasterize import _raster
 
     @njit
     def raster_all(uv_iz, box_px, H, W):

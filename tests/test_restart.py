@@ -14,11 +14,12 @@ import pytest
 from fast_params import small_params
 from test_timestamps import assert_same_when_settled, feed, simulate
 
-from drake_tracker.core.angle_observation import AngleObservation, Restart
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.estimate import PoseReadout
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.health import (
+from drake_tracker.core.filter.angle_observation import AngleObservation, Restart
+from drake_tracker.core.filter.estimate import PoseReadout
+from drake_tracker.core.filter.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
+from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.robustness.health import (
     HealthParams,
     ImageConsistency,
     TrackerHealth,
@@ -26,13 +27,12 @@ from drake_tracker.core.health import (
     next_health,
     restart_due,
 )
-from drake_tracker.core.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.core.renderer import default_view_configuration, make_renderer
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.metrics import pose_errors
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 from drake_tracker.tracker import Tracker
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))

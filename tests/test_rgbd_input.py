@@ -14,9 +14,9 @@ from pydrake.systems.primitives import ConstantVectorSource
 from pydrake.systems.sensors import CameraInfo, ImageDepth16U, ImageDepth32F
 
 from drake_tracker import AddTracker, DepthImageToFrame, ImageStamper, TrackerParams
-from drake_tracker.core.camera import CameraIntrinsics, as_intrinsics
-from drake_tracker.core.frames import DepthFrame, depth_to_metres
-from drake_tracker.robot import build_tracker_model, robot_preset
+from drake_tracker.core.sensors.camera import CameraIntrinsics, as_intrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame, depth_to_metres
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 
 
 def test_depth_encodings_convert_to_metres_with_nan_for_invalid():

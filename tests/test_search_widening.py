@@ -7,19 +7,19 @@ install: ``examples/vendor_robot.py`` and the README measure it.)"""
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.health import TrackerHealth
-from drake_tracker.core.image_update import CpfImageUpdate
-from drake_tracker.core.kalman import MEAN_A
-from drake_tracker.core.likelihood import (
+from drake_tracker.core.cpf.image_update import CpfImageUpdate
+from drake_tracker.core.filter.kalman import MEAN_A
+from drake_tracker.core.image_step import ImageProcessor, make_bank_and_prior
+from drake_tracker.core.likelihood.occlusion import with_pixel_occlusion
+from drake_tracker.core.likelihood.pixel_model import (
     LikelihoodParams,
     prepare_observation,
     widened_observation,
 )
-from drake_tracker.core.occlusion import with_pixel_occlusion
-from drake_tracker.core.pipeline import ImageProcessor, make_bank_and_prior
-from drake_tracker.core.renderer import default_view_configuration
-from drake_tracker.params import TrackerParams, load_tracker_params
+from drake_tracker.core.render.backends import default_view_configuration
+from drake_tracker.core.robustness.health import TrackerHealth
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
 
 PER_PIXEL = ("sigma", "gauss_coeff", "occ_coeff", "log_p_occ_inf", "inv_sigma",
              "lam_sigma2")

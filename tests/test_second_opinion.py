@@ -20,16 +20,16 @@ from test_restart import (
     hand_error_mm,
 )
 
-from drake_tracker.core.health import (
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A
+from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
+from drake_tracker.core.robustness.health import (
     HealthParams,
     ImageConsistency,
     TrackerHealth,
     is_reacquiring,
     is_surprising,
 )
-from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A
-from drake_tracker.core.pipeline import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 
 FOLD_DEG = {"arm_joint_2": 8.0, "arm_joint_4": -12.0}
 ENCODER_BIAS_DEG = {"arm_joint_1": 3.0, "arm_joint_2": -3.0, "arm_joint_3": 3.0}

@@ -114,7 +114,7 @@ def test_config_round_trips_and_names_a_bad_field(tmp_path):
 
 
 def test_cli_rejects_an_unknown_run(capsys):
-    from drake_tracker.cli import main
+    from drake_tracker.cli.main import main
 
     assert main(["servo", "--runs", "encoders,magic", "--no-meshcat"]) == 2
     assert "magic" in capsys.readouterr().err
@@ -126,7 +126,7 @@ def test_the_joint_servo_reference_is_computed_again_only_when_its_inputs_change
     systems' updates: it depends on its two inputs only, not on time or any state."""
     from pydrake.multibody.plant import MultibodyPlant
 
-    from drake_tracker.robot import add_robot, build_tracker_model, robot_preset
+    from drake_tracker.robot.model import add_robot, build_tracker_model, robot_preset
     from drake_tracker.servo.world import JointServoReference
 
     config = robot_preset("apollo")

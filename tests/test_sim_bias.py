@@ -9,7 +9,7 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from drake_tracker.sim.bias import JointBiasModel, listed_steps_bias, profile_bias, ramp_bias
 from drake_tracker.sim.encoders import BiasedEncoders
-from drake_tracker.sim.scenario import BiasProfile, EncoderConfig, load_scenario
+from drake_tracker.sim.scenario.load import BiasProfile, EncoderConfig, load_scenario
 from drake_tracker.sim.streams import sample_normals
 
 NAMES = ["a", "b", "c", "d"]
@@ -105,7 +105,7 @@ def test_ramp_preset_and_profile_errors():
         "ramp", 8.6, 0.0, 10.0)
     e.bias_profiles = {"arm_joint_1": BiasProfile(kind="steps", step_times_s=[1.0, 1.2],
                                                   step_values_deg=[1.0, 2.0])}
-    from drake_tracker.sim.scenario import validate_scenario
+    from drake_tracker.sim.scenario.load import validate_scenario
 
     with pytest.raises(ValueError, match=r"bias_profiles\[arm_joint_1\]\.step_times_s"):
         validate_scenario(s, check_model=False)

@@ -9,7 +9,7 @@ import pytest
 from pydrake.geometry import ColorRenderCamera
 from pydrake.math import RigidTransform
 
-from drake_tracker.core.camera import subsample
+from drake_tracker.core.sensors.camera import subsample
 from drake_tracker.sim.depth_camera import (
     camera_intrinsics,
     corrupt_depth,
@@ -17,7 +17,7 @@ from drake_tracker.sim.depth_camera import (
     rendered_intrinsics,
 )
 from drake_tracker.sim.record import simulate_and_record
-from drake_tracker.sim.scenario import load_scenario, validate_scenario
+from drake_tracker.sim.scenario.load import load_scenario, validate_scenario
 from drake_tracker.sim.world import build_simulated_world
 
 STRIDE = 8

@@ -7,7 +7,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 from drake_tracker.sim.encoders import BiasedEncoders, sample_normals
-from drake_tracker.sim.scenario import EncoderConfig
+from drake_tracker.sim.scenario.load import EncoderConfig
 
 NAMES = ["a", "b", "c"]
 TRUE_Q = np.array([0.3, -0.2, 1.0])

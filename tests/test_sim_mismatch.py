@@ -9,10 +9,10 @@ import pytest
 from pydrake.common.yaml import yaml_dump
 from pydrake.geometry import SceneGraph
 
-from drake_tracker.robot import build_tracker_model
+from drake_tracker.robot.model import build_tracker_model
 from drake_tracker.sim.depth_camera import depth_render_camera, ensure_vtk_renderer
 from drake_tracker.sim.record import simulate_and_record
-from drake_tracker.sim.scenario import ModelMismatchConfig, Scenario, load_scenario
+from drake_tracker.sim.scenario.load import ModelMismatchConfig, Scenario, load_scenario
 from drake_tracker.sim.world import build_simulated_world
 
 
@@ -139,12 +139,12 @@ def test_mismatch_preset_and_bad_values():
     assert not load_scenario("s-full-arm/constant").model_mismatch.enabled
     s.model_mismatch.hand_scale = 0.0
     with pytest.raises(ValueError, match=r"model_mismatch\.hand_scale"):
-        from drake_tracker.sim.scenario import validate_scenario
+        from drake_tracker.sim.scenario.load import validate_scenario
 
         validate_scenario(s, check_model=False)
     s = load_scenario("static/none")
     s.model_mismatch.joints = ["no_such_joint"]
     with pytest.raises(ValueError, match=r"model_mismatch\.joints"):
-        from drake_tracker.sim.scenario import validate_scenario
+        from drake_tracker.sim.scenario.load import validate_scenario
 
         validate_scenario(s)

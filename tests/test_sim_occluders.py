@@ -4,7 +4,7 @@ inside its window; the heavy-occlusion presets hide most of the arm; YAML and er
 import numpy as np
 import pytest
 
-from drake_tracker.sim.scenario import OccluderSpec, Scenario, load_scenario
+from drake_tracker.sim.scenario.load import OccluderSpec, Scenario, load_scenario
 from drake_tracker.sim.world import build_simulated_world
 
 
@@ -145,7 +145,7 @@ def test_heavy_occlusion_hides_most_of_the_arm_in_its_window(name):
 
 def test_legacy_occluder_is_the_first_of_the_list():
     s = load_scenario("occlusion/none")
-    from drake_tracker.sim.scenario import scenario_occluders
+    from drake_tracker.sim.scenario.load import scenario_occluders
 
     (box,) = scenario_occluders(s)
     assert (box.motion, box.shape, box.enter_s, box.leave_s, box.ramp_s) == (
@@ -181,7 +181,7 @@ def test_occluders_load_from_yaml_and_errors_name_the_field(tmp_path):
 
 
 def test_a_shortened_run_keeps_every_event_in_it():
-    from drake_tracker.sim.timing import shorten_scenario
+    from drake_tracker.sim.scenario.timing import shorten_scenario
 
     heavy = shorten_scenario(load_scenario("occlusion-heavy/ramp"), 10.0)
     o = heavy.occluders[0]

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from drake_tracker.robot import build_tracker_model
-from drake_tracker.sim.scenario import (
+from drake_tracker.robot.model import build_tracker_model
+from drake_tracker.sim.scenario.load import (
     ROBOT_PROFILES,
     TrajectoryConfig,
     list_presets,

@@ -9,12 +9,12 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_tracker.io.replay import encoders_only_X_CE, readings_at
 from drake_tracker.metrics import pose_errors
-from drake_tracker.offline import encoders_only_X_CE, readings_at
-from drake_tracker.robot import add_robot, camera_offset_transform
+from drake_tracker.robot.model import add_robot, camera_offset_transform
 from drake_tracker.sim.depth_camera import depth_render_camera, ensure_vtk_renderer
 from drake_tracker.sim.record import simulate_and_record
-from drake_tracker.sim.scenario import Scenario, load_scenario
+from drake_tracker.sim.scenario.load import Scenario, load_scenario
 from drake_tracker.sim.world import build_simulated_world
 
 
@@ -291,7 +291,7 @@ def test_occluder_is_between_camera_and_hand_only_while_active():
     (lambda s: setattr(s, "robot", "nope"), "Scenario.robot"),
 ])
 def test_bad_scenario_values_name_the_field(mutate, field):
-    from drake_tracker.sim.scenario import validate_scenario
+    from drake_tracker.sim.scenario.load import validate_scenario
 
     s = load_scenario("s-full-arm/constant")
     mutate(s)
@@ -300,8 +300,8 @@ def test_bad_scenario_values_name_the_field(mutate, field):
 
 
 def test_unknown_preset_and_camera_frame_are_rejected():
-    from drake_tracker.robot import RobotConfig
-    from drake_tracker.sim.scenario import validate_scenario
+    from drake_tracker.robot.model import RobotConfig
+    from drake_tracker.sim.scenario.load import validate_scenario
 
     with pytest.raises(ValueError, match="unknown scenario preset 's-nothing/constant'"):
         load_scenario("s-nothing/constant")

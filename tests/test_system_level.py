@@ -5,11 +5,11 @@ Diagram, then the same recording replayed through the offline tracker."""
 import numpy as np
 import pytest
 
+from drake_tracker.io.replay import encoders_only_X_CE, replay_run
 from drake_tracker.metrics import pose_errors
-from drake_tracker.offline import encoders_only_X_CE, replay_run
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.sim.record import simulate_and_record
-from drake_tracker.sim.scenario import load_scenario
+from drake_tracker.sim.scenario.load import load_scenario
 from drake_tracker.systems.add_tracker import AddTracker
 
 

@@ -7,13 +7,13 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import VectorLogSink
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.pipeline import make_bank_and_prior
-from drake_tracker.offline import replay_run
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import build_tracker_model, robot_preset
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.core.image_step import make_bank_and_prior
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.io.replay import replay_run
+from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 from drake_tracker.systems.add_tracker import AddTracker
 from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
 from drake_tracker.systems.messages import ImageObservationMessage
@@ -163,8 +163,8 @@ def test_a_copied_context_shares_the_stored_states_and_neither_sees_the_other(ap
 
 
 def _cpf_system_with_a_frame(apollo, p):
-    from drake_tracker.core.belief_buffer import ImageAnchor
-    from drake_tracker.core.renderer import default_view_configuration
+    from drake_tracker.core.filter.belief_buffer import ImageAnchor
+    from drake_tracker.core.render.backends import default_view_configuration
     from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
     from drake_tracker.systems.messages import ImagePrior
 

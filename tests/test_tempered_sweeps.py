@@ -9,18 +9,18 @@ must be exactly the coarser subsampling of the image, per-pixel occlusion includ
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics, subsample
-from drake_tracker.core.cpf import annealed_coordinate_particle_filter
-from drake_tracker.core.image_update import CpfImageUpdate
-from drake_tracker.core.kalman import initial_moments
-from drake_tracker.core.likelihood import (
+from drake_tracker.core.cpf.image_update import CpfImageUpdate
+from drake_tracker.core.cpf.particle_filter import annealed_coordinate_particle_filter
+from drake_tracker.core.filter.kalman import initial_moments
+from drake_tracker.core.likelihood.occlusion import with_pixel_occlusion
+from drake_tracker.core.likelihood.pixel_model import (
     LikelihoodParams,
     coarser_observation,
     prepare_observation,
 )
-from drake_tracker.core.occlusion import with_pixel_occlusion
-from drake_tracker.core.renderer import default_view_configuration
-from drake_tracker.params import TrackerParams, load_tracker_params
+from drake_tracker.core.render.backends import default_view_configuration
+from drake_tracker.core.sensors.camera import CameraIntrinsics, subsample
+from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
 
 BETAS = (0.003, 0.03, 0.3, 1.0)
 PER_PIXEL = ("z", "sigma", "gauss_coeff", "occ_coeff", "log_p_occ_inf", "inv_sigma",

@@ -1,4 +1,4 @@
-"""The time-stamp policy of core/timestamps.py on its own: a glitch, a clock that steps and
+"""The time-stamp policy of core/sensors/timestamps.py on its own: a glitch, a clock that steps and
 stays, a glitched first stamp, images out of order, the images following the readings'
 clock, rate-limited warnings and the parameters' validation (the faults fed through the
 trackers are in test_timestamps.py)."""
@@ -9,9 +9,13 @@ import numpy as np
 import pytest
 from awkward_stamps import awkward_stamps
 
-from drake_tracker.core.rate_limited_warning import RateLimitedWarning
-from drake_tracker.core.timestamps import StreamClock
-from drake_tracker.params import TimestampParams, TrackerParams, validate_tracker_params
+from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.sensors.timestamps import StreamClock
+from drake_tracker.params.tracker_params import (
+    TimestampParams,
+    TrackerParams,
+    validate_tracker_params,
+)
 
 
 def test_a_glitch_is_rejected_and_does_not_poison_later_stamps():

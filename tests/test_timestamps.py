@@ -12,11 +12,11 @@ from fast_params import small_params
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_tracker.core.belief_buffer import BeliefBuffer
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.pipeline import full_reading, new_belief_buffer
-from drake_tracker.params import TimestampParams
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.core.filter.belief_buffer import BeliefBuffer
+from drake_tracker.core.image_step import full_reading, new_belief_buffer
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import TimestampParams
 from drake_tracker.systems.add_tracker import AddTracker
 from drake_tracker.systems.recorded_run_source import RecordedRunSource
 from drake_tracker.tracker import Tracker
@@ -308,7 +308,7 @@ def test_a_copied_gate_is_independent_and_shares_only_what_never_changes(how):
     other's later samples."""
     import copy
 
-    from drake_tracker.core.reading_gate import ReadingGate
+    from drake_tracker.core.sensors.reading_gate import ReadingGate
 
     gate = ReadingGate(TimestampParams(), ["a", "b"])
     for k in range(20):
@@ -363,7 +363,7 @@ def test_an_encoder_clock_step_forward_is_told_from_a_gap_by_the_images(apollo, 
 def test_median_is_numpys_median_bit_for_bit():
     from collections import deque
 
-    from drake_tracker.core.timestamps import RECENT_GAPS, median
+    from drake_tracker.core.sensors.timestamps import RECENT_GAPS, median
 
     rng = np.random.default_rng(0)
     for n in range(1, RECENT_GAPS + 1):

@@ -6,21 +6,21 @@ import logging
 import numpy as np
 import pytest
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.image_update import CpfImageUpdate
-from drake_tracker.core.kalman import initial_moments
-from drake_tracker.core.pipeline import camera_chain_joints
-from drake_tracker.core.renderer import default_view_configuration, make_renderer
-from drake_tracker.offline import encoders_only_X_CE, replay_run, run_report
-from drake_tracker.params import (
+from drake_tracker.core.cpf.image_update import CpfImageUpdate
+from drake_tracker.core.filter.kalman import initial_moments
+from drake_tracker.core.image_step import camera_chain_joints
+from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.io.replay import encoders_only_X_CE, replay_run, run_report
+from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.params.tracker_params import (
     JointNoise,
     TrackerParams,
     load_tracker_params,
     resolve_kalman_params,
 )
-from drake_tracker.robot import build_tracker_model, robot_preset
-from drake_tracker.synthetic import synthetic_run
+from drake_tracker.robot.model import build_tracker_model, robot_preset
 from drake_tracker.tracker import Tracker
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
@@ -44,7 +44,7 @@ def test_bad_readings_are_rejected_by_name(apollo, caplog):
     n = len(apollo.robot_joint_names)
     with pytest.raises(ValueError, match="shape"):
         tracker.add_reading(0.0, np.zeros(n + 1))
-    # Unusable values and stamps are skipped with a warning (core/timestamps.py).
+    # Unusable values and stamps are skipped with a warning (core/sensors/timestamps.py).
     with caplog.at_level(logging.WARNING):
         tracker.add_reading(0.0, np.full(n, np.nan))
         assert not tracker.started and "not finite" in caplog.text

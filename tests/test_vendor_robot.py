@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.renderer import make_renderer
-from drake_tracker.robot import (
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.model import (
     FrameOffset,
     RobotConfig,
     build_tracker_model,
@@ -202,7 +202,7 @@ def test_unknown_package_and_frame_are_named(vendor):
 
 
 def test_sdf_with_package_uris_loads_the_stl_meshes_triangle_for_triangle(vendor, tmp_path):
-    from drake_tracker.core.geometry import extract_robot_meshes
+    from drake_tracker.core.render.meshes import extract_robot_meshes
 
     root, package, _ = vendor
     sdf = tmp_path / "two_links.sdf"

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_tracker.evaluation.methods import METHODS
+from drake_tracker.evaluation.plot_style import mark_scenario_events, method_label
 from drake_tracker.evaluation.summary import settled
 from drake_tracker.evaluation.tasks import sequence_stem, task_name
-from drake_tracker.methods import METHODS
-from drake_tracker.plots import mark_scenario_events, method_label
 
 #: One colour per method; the box plots draw their medians black over these.
 METHOD_COLORS = dict(zip(METHODS, ("0.6", "tab:blue", "tab:orange", "tab:green")))
@@ -91,8 +91,8 @@ def _stored_scenario(out_dir: Path, seq: str, bias: str, seed: int):
     """The scenario a stored run was simulated with (the preset if the run is gone)."""
     from pydrake.common.yaml import yaml_load_typed
 
-    from drake_tracker.recording import RecordedRun
-    from drake_tracker.sim.scenario import Scenario, load_scenario
+    from drake_tracker.io.recording import RecordedRun
+    from drake_tracker.sim.scenario.load import Scenario, load_scenario
 
     path = out_dir / "runs" / f"{task_name(seq, bias, seed)}.npz"
     if path.exists():

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from drake_tracker.evaluation.executors import Executor, SerialExecutor, make_executor
+from drake_tracker.evaluation.methods import METHODS
 from drake_tracker.evaluation.paper_comparison import format_paper_comparison, paper_comparison
 from drake_tracker.evaluation.plots import plot_results
 from drake_tracker.evaluation.results import (
@@ -23,7 +24,6 @@ from drake_tracker.evaluation.results import (
 )
 from drake_tracker.evaluation.summary import summarize, write_summary
 from drake_tracker.evaluation.tasks import SETTLE_S, Task, TaskRunner, make_tasks
-from drake_tracker.methods import METHODS
 
 if TYPE_CHECKING:
     import argparse
@@ -178,7 +178,7 @@ def _parse(args) -> list[Task]:
         raise SystemExit("--address is for --executor ray")
     params_yaml = ""
     if args.params:
-        from drake_tracker.params import load_tracker_params, tracker_params_to_yaml
+        from drake_tracker.params.tracker_params import load_tracker_params, tracker_params_to_yaml
 
         params_yaml = tracker_params_to_yaml(load_tracker_params(args.params))
     tasks = make_tasks(args.quick, args.seeds, methods, params_yaml, args.duration)

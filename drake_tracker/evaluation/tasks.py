@@ -22,13 +22,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.methods import method_params
+from drake_tracker.evaluation.methods import method_params
 from drake_tracker.metrics import pose_errors
 
 if TYPE_CHECKING:
-    from drake_tracker.params import TrackerParams
-    from drake_tracker.recording import RecordedRun
-    from drake_tracker.sim.config import Scenario
+    from drake_tracker.io.recording import RecordedRun
+    from drake_tracker.params.tracker_params import TrackerParams
+    from drake_tracker.sim.scenario.config import Scenario
 
 #: The quick suite: each kind of sequence (sinusoid, free, fast, out of view, occlusion)
 #: with each bias variant, shortened.
@@ -92,8 +92,8 @@ class Task:
     def scenario(self) -> Scenario:
         """The preset with this task's seed; a shortened run keeps its events in it (the
         hand leaves the view, the occluder passes) by compressing their timing."""
-        from drake_tracker.sim.scenario import load_scenario
-        from drake_tracker.sim.timing import shorten_scenario
+        from drake_tracker.sim.scenario.load import load_scenario
+        from drake_tracker.sim.scenario.timing import shorten_scenario
 
         scenario = load_scenario(f"{self.sequence}/{self.bias}")
         scenario.seed = self.seed
@@ -107,7 +107,7 @@ def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...],
     """The protocol's tasks: the quick suite (``QUICK_SEQUENCES``, 10 s, 3 seeds) or the
     full one (12 sequences at their preset durations, 10 seeds), × the bias variants.
     ``duration_s`` shortens every run (a slice for cost measurements and tests)."""
-    from drake_tracker.sim.scenario import SEQUENCES
+    from drake_tracker.sim.scenario.load import SEQUENCES
 
     if quick:
         sequences, duration, num_seeds = QUICK_SEQUENCES, QUICK_DURATION_S, seeds or QUICK_SEEDS
@@ -128,7 +128,7 @@ def task_base_params(task: Task) -> TrackerParams | None:
         return None
     from pydrake.common.yaml import yaml_load_typed
 
-    from drake_tracker.params import TrackerParams, validate_tracker_params
+    from drake_tracker.params.tracker_params import TrackerParams, validate_tracker_params
 
     params = yaml_load_typed(schema=TrackerParams, data=task.params_yaml)
     validate_tracker_params(params)
@@ -164,7 +164,7 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
     {method: {"times_s", "translation_mm", "rotation_deg"}}; each method's wall time
     goes into ``wall_s`` if given.
     """
-    from drake_tracker.offline import encoders_only_X_CE, model_for_run, replay_run
+    from drake_tracker.io.replay import encoders_only_X_CE, model_for_run, replay_run
 
     model = model_for_run(run)
     times = _sample_times(run, sample_period_s)
@@ -268,7 +268,7 @@ def _simulation_progress(report: Reporter, duration_s: float):
 
 
 def _load_or_simulate(task: Task, cache_dir: Path | None, report: Reporter):
-    from drake_tracker.recording import RecordedRun
+    from drake_tracker.io.recording import RecordedRun
     from drake_tracker.sim.record import simulate_and_record
 
     path = cache_dir / f"{task.name}.npz" if cache_dir is not None else None

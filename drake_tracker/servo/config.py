@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from drake_tracker.sim.validation import (
+from drake_tracker.sim.scenario.validation import (
     require,
     require_length,
     require_non_negative,

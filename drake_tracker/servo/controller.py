@@ -41,7 +41,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
-from drake_tracker.robot import RobotConfig, add_robot
+from drake_tracker.robot.model import RobotConfig, add_robot
 from drake_tracker.servo.config import ServoGains, ServoStudyConfig
 
 LOGGER = logging.getLogger("drake_tracker.servo")

@@ -23,12 +23,12 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, OutputPort
 from pydrake.systems.primitives import MatrixGain
 
-from drake_tracker.core.health import HealthState, TrackerHealth
-from drake_tracker.params import TrackerParams
-from drake_tracker.robot import RobotConfig, add_robot
+from drake_tracker.core.robustness.health import HealthState, TrackerHealth
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import RobotConfig, add_robot
 from drake_tracker.servo.config import FEEDBACKS
 from drake_tracker.servo.world import ServoWorld, camera_model
-from drake_tracker.sim.validation import require_one_of
+from drake_tracker.sim.scenario.validation import require_one_of
 from drake_tracker.systems.add_tracker import AddTracker, TrackerSystems
 
 

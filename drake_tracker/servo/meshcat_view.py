@@ -22,9 +22,9 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_tracker.demo.meshcat_views import ENCODERS_RGBA, AddGhostRobot, LegendEntry
 from drake_tracker.servo.config import FEEDBACK_LABELS, ServoStudyConfig
 from drake_tracker.servo.world import ServoWorld
-from drake_tracker.visualization import ENCODERS_RGBA, AddGhostRobot, LegendEntry
 
 #: Colours of the runs drawn as ghosts.
 RUN_RGBA = {"encoders": ENCODERS_RGBA, "truth": Rgba(0.35, 0.35, 0.35, 0.35)}
@@ -73,7 +73,7 @@ class ServoMeshcatView:
 
     def finish(self) -> str:
         """Stops and publishes the recording; the standalone HTML with a legend."""
-        from drake_tracker.visualization import add_legend
+        from drake_tracker.demo.meshcat_views import add_legend
 
         self.meshcat.StopRecording()
         self.meshcat.PublishRecording()

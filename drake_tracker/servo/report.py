@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.demo import start_meshcat
-from drake_tracker.params import TrackerParams
+from drake_tracker.demo.run import start_meshcat
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.servo.config import (
     FEEDBACK_LABELS,
     FEEDBACKS,

@@ -22,14 +22,14 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from drake_tracker.kernel_warm_up import warm_up_tracker_kernels
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.progress import SimulatedSecondsBar
 from drake_tracker.servo.config import FEEDBACK_LABELS, ServoStudyConfig
 from drake_tracker.servo.controller import CameraFrameServo
 from drake_tracker.servo.feedback import AddFeedback
 from drake_tracker.servo.world import AddServoWorld, ServoWorld
-from drake_tracker.sim.config import Scenario
-from drake_tracker.sim.validation import require
+from drake_tracker.sim.scenario.config import Scenario
+from drake_tracker.sim.scenario.validation import require
 from drake_tracker.systems.add_tracker import TrackerSystems
 
 #: A hook that adds visualisation to a servo Diagram: (builder, world, feedback) -> None.
@@ -39,7 +39,7 @@ Visualize = Callable[[DiagramBuilder, ServoWorld, str], None]
 def servo_scenario(config: ServoStudyConfig) -> Scenario:
     """The study's world: ``config.scenario`` loaded and checked, in dynamic mode (a world
     robot that differs from the model, ``model_mismatch``, is not supported)."""
-    from drake_tracker.sim.scenario import load_scenario
+    from drake_tracker.sim.scenario.load import load_scenario
 
     scenario = load_scenario(config.scenario)
     require(not scenario.model_mismatch.enabled, "scenario", config.scenario,
@@ -69,7 +69,7 @@ def build_servo_diagram(config: ServoStudyConfig, feedback: str,
     Only the tracker's run renders depth images (the other two need no camera), and only
     the pixels the tracker reads (``demo.render_what_the_tracker_reads``: the same
     images, at a fraction of the rendering cost)."""
-    from drake_tracker.demo import render_what_the_tracker_reads
+    from drake_tracker.demo.run import render_what_the_tracker_reads
 
     scenario = scenario or servo_scenario(config)
     if feedback == "tracker":

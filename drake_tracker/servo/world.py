@@ -36,8 +36,8 @@ from pydrake.systems.framework import (
 )
 from pydrake.systems.primitives import Demultiplexer
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.robot import (
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.model import (
     VIRTUAL_JOINT_NAMES,
     RobotConfig,
     TrackerModel,
@@ -45,7 +45,6 @@ from drake_tracker.robot import (
     add_virtual_camera_joints,
     build_tracker_model,
 )
-from drake_tracker.sim.config import Scenario, scenario_occluders
 from drake_tracker.sim.depth_camera import (
     AddDepthCamera,
     DepthCameraSystem,
@@ -54,11 +53,12 @@ from drake_tracker.sim.depth_camera import (
 from drake_tracker.sim.encoders import BiasedEncoders
 from drake_tracker.sim.environment import add_environment
 from drake_tracker.sim.occluders import AddOccluders, OccluderMotion
-from drake_tracker.sim.profiles import robot_profile
 from drake_tracker.sim.reference import offset_gain_matrix, position_joint_names
+from drake_tracker.sim.scenario.config import Scenario, scenario_occluders
+from drake_tracker.sim.scenario.profiles import robot_profile
+from drake_tracker.sim.scenario.validation import require
 from drake_tracker.sim.trajectories import make_joint_trajectory
 from drake_tracker.sim.truth import TruthSystem
-from drake_tracker.sim.validation import require
 from drake_tracker.sim.world import add_truth_and_encoders
 
 

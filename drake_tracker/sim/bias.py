@@ -1,7 +1,7 @@
 """Encoder bias models: pure functions of time (and, for the random walk, of draws).
 
 Every biased joint follows ``EncoderConfig.bias`` unless ``bias_profiles`` gives it its
-own :class:`~drake_tracker.sim.config.BiasProfile`. The models (deg in the configs, rad
+own :class:`~drake_tracker.sim.scenario.config.BiasProfile`. The models (deg in the configs, rad
 here):
 
 * ``none``: 0; ``constant``: a fixed value;
@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from drake_tracker.sim.config import BiasProfile, EncoderConfig
-from drake_tracker.sim.validation import require
+from drake_tracker.sim.scenario.config import BiasProfile, EncoderConfig
+from drake_tracker.sim.scenario.validation import require
 
 
 def constant_bias(times_s: np.ndarray, num_joints: int, bias_rad: float) -> np.ndarray:

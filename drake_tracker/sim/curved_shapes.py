@@ -37,7 +37,7 @@ from pydrake.geometry import (
     Sphere,
 )
 
-from drake_tracker.core.geometry import sphere_mesh, tessellate_shape
+from drake_tracker.core.render.meshes import sphere_mesh, tessellate_shape
 
 #: The shapes replaced.
 CURVED_SHAPES = (Sphere, Cylinder, Capsule, Ellipsoid)

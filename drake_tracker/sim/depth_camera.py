@@ -53,10 +53,10 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.sensors import ImageDepth32F, RgbdSensor
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.sim.config import CameraConfig
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.sim.curved_shapes import tessellate_curved_perception
+from drake_tracker.sim.scenario.config import CameraConfig
 from drake_tracker.sim.streams import counter_generator
 
 #: Name of the renderer the simulated camera uses.

@@ -16,7 +16,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem
 
 from drake_tracker.sim.bias import JointBiasModel
-from drake_tracker.sim.config import EncoderConfig
+from drake_tracker.sim.scenario.config import EncoderConfig
 from drake_tracker.sim.streams import CounterNormals, sample_normals
 
 __all__ = ["BiasedEncoders", "quantize", "sample_normals"]

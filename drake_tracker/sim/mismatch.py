@@ -42,9 +42,9 @@ from pydrake.multibody.tree import (
     RigidBody,
 )
 
-from drake_tracker.sim.config import ModelMismatchConfig
+from drake_tracker.sim.scenario.config import ModelMismatchConfig
+from drake_tracker.sim.scenario.validation import require
 from drake_tracker.sim.streams import counter_generator
-from drake_tracker.sim.validation import require
 
 #: Random stream of the world robot's perturbations.
 MISMATCH_STREAM = 9

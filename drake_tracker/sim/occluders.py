@@ -1,6 +1,6 @@
 """Occluders: boxes, cylinders and spheres between the camera and the robot.
 
-Each :class:`~drake_tracker.sim.config.OccluderSpec` is one geometry frame of its own
+Each :class:`~drake_tracker.sim.scenario.config.OccluderSpec` is one geometry frame of its own
 SceneGraph source (``occluders``), posed by :class:`OccluderPoses` from the time and the
 world plant's positions, so the same occluders work in kinematic and dynamic mode and
 never enter the plant. Its pose while in the scene (``motion``):
@@ -38,9 +38,9 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame, ModelInstanceIndex
 from pydrake.systems.framework import DiagramBuilder, LeafSystem, OutputPort
 
-from drake_tracker.sim.config import CAMERA_FRAME_NAME, OccluderSpec
+from drake_tracker.sim.scenario.config import CAMERA_FRAME_NAME, OccluderSpec
+from drake_tracker.sim.scenario.validation import require
 from drake_tracker.sim.trajectories import smooth_window
-from drake_tracker.sim.validation import require
 
 #: Render labels of the occluders start here (the plant uses its body indices).
 OCCLUDER_LABEL_BASE = 9000

@@ -1,6 +1,6 @@
-"""Simulate a scenario and record it as a :class:`~drake_tracker.recording.RecordedRun`.
+"""Simulate a scenario and record it as a :class:`~drake_tracker.io.recording.RecordedRun`.
 
-What is stored (see ``drake_tracker.recording`` for the ``.npz`` keys):
+What is stored (see ``drake_tracker.io.recording`` for the ``.npz`` keys):
 
 * every encoder reading, at the full encoder rate, stamped with its sample time;
 * every depth image that arrived during the run, subsampled by ``image_stride``
@@ -34,10 +34,10 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 from pydrake.systems.primitives import LogVectorOutput
 
-from drake_tracker.core.camera import subsample
+from drake_tracker.core.sensors.camera import subsample
+from drake_tracker.io.recording import RecordedRun
 from drake_tracker.progress import SimulatedSecondsBar
-from drake_tracker.recording import RecordedRun
-from drake_tracker.sim.scenario import Scenario, load_scenario, validate_scenario
+from drake_tracker.sim.scenario.load import Scenario, load_scenario, validate_scenario
 from drake_tracker.sim.world import AddSimulatedWorld, SimulatedWorld
 
 if TYPE_CHECKING:
@@ -192,7 +192,7 @@ def logged_readings(logged: dict[str, np.ndarray], duration_s: float
 
 def run_record(args: argparse.Namespace) -> int:
     """``drake-tracker record --scenario NAME --out FILE [--duration S] [--image-stride N]``:
-    simulates and writes the run as ``.npz`` (format in ``drake_tracker.recording``)."""
+    simulates and writes the run as ``.npz`` (format in ``drake_tracker.io.recording``)."""
     scenario = load_scenario(args.scenario)
     run = simulate_and_record(scenario, duration_s=args.duration,
                               image_stride=args.image_stride, validate=False, progress=True)

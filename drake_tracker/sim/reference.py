@@ -13,15 +13,15 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import MultibodyForces
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from drake_tracker.robot import VIRTUAL_JOINT_NAMES
-from drake_tracker.sim.config import Scenario
+from drake_tracker.robot.model import VIRTUAL_JOINT_NAMES
+from drake_tracker.sim.scenario.config import Scenario
+from drake_tracker.sim.scenario.validation import require
 from drake_tracker.sim.trajectories import JointTrajectory
-from drake_tracker.sim.validation import require
 
 
 def position_joint_names(plant: MultibodyPlant) -> list[str]:
     """Names of the plant's single-DoF joints in position-vector order (as
-    ``drake_tracker.robot.joint_names``, but also for a plant with removed joints)."""
+    ``drake_tracker.robot.model.joint_names``, but also for a plant with removed joints)."""
     joints = [plant.get_joint(index) for index in plant.GetJointIndices()]
     joints = sorted((j for j in joints if j.num_positions() == 1),
                     key=lambda j: j.position_start())

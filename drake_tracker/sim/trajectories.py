@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.sim.config import TrajectoryConfig
-from drake_tracker.sim.profiles import RobotProfile
+from drake_tracker.sim.scenario.config import TrajectoryConfig
+from drake_tracker.sim.scenario.profiles import RobotProfile
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

@@ -9,7 +9,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import Frame
 from pydrake.systems.framework import LeafSystem
 
-from drake_tracker.robot import VIRTUAL_JOINT_NAMES
+from drake_tracker.robot.model import VIRTUAL_JOINT_NAMES
 from drake_tracker.sim.reference import position_joint_names
 
 

@@ -35,34 +35,34 @@ from pydrake.systems.framework import Context, Diagram, DiagramBuilder, OutputPo
 from pydrake.systems.primitives import Demultiplexer
 from pydrake.systems.rendering import MultibodyPositionToGeometryPose
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.robot import (
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.model import (
     RobotConfig,
     TrackerModel,
     add_robot,
     add_virtual_camera_joints,
     build_tracker_model,
 )
-from drake_tracker.sim.config import Scenario, scenario_occluders
 from drake_tracker.sim.depth_camera import AddDepthCamera, DepthCameraSystem
 from drake_tracker.sim.encoders import BiasedEncoders
 from drake_tracker.sim.environment import add_environment
 from drake_tracker.sim.mismatch import apply_model_mismatch
 from drake_tracker.sim.occluders import AddOccluders, OccluderMotion
-from drake_tracker.sim.profiles import robot_profile
 from drake_tracker.sim.reference import (
     InverseDynamicsTracking,
     ReferenceMotion,
     TrajectoryPlayback,
     position_joint_names,
 )
+from drake_tracker.sim.scenario.config import Scenario, scenario_occluders
+from drake_tracker.sim.scenario.profiles import robot_profile
+from drake_tracker.sim.scenario.validation import require_one_of
 from drake_tracker.sim.trajectories import (
     JointTrajectory,
     check_within_limits,
     make_joint_trajectory,
 )
 from drake_tracker.sim.truth import TruthSystem
-from drake_tracker.sim.validation import require_one_of
 
 #: Output ports of the simulated world, by name.
 WORLD_PORTS = ("true_position", "measured_position", "measurement_time", "true_bias",

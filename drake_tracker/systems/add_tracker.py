@@ -25,8 +25,8 @@ from typing import TYPE_CHECKING
 
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 
-from drake_tracker.core.camera import as_intrinsics
-from drake_tracker.params import TrackerParams
+from drake_tracker.core.sensors.camera import as_intrinsics
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
 from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
 from drake_tracker.systems.depth_image_adapter import DepthImageToFrame, depth_port_kind
@@ -36,8 +36,8 @@ if TYPE_CHECKING:
     from pydrake.geometry import DepthRenderCamera, RenderCameraCore
     from pydrake.systems.sensors import CameraInfo
 
-    from drake_tracker.core.camera import CameraIntrinsics
-    from drake_tracker.robot import TrackerModel
+    from drake_tracker.core.sensors.camera import CameraIntrinsics
+    from drake_tracker.robot.model import TrackerModel
 
 #: Output ports of the Kalman bank that ``AddTracker`` exports.
 ESTIMATE_PORTS = ("estimated_position", "position_variance", "bias", "bias_variance",

@@ -10,19 +10,19 @@ from typing import TYPE_CHECKING
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, LeafSystem
 
-from drake_tracker.core.camera import CameraIntrinsics
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.health import TrackerHealth, next_health
-from drake_tracker.core.pipeline import ImageProcessor, jump_window_s
-from drake_tracker.core.rate_limited_warning import RateLimitedWarning
-from drake_tracker.core.timestamps import problem_kind
-from drake_tracker.params import TrackerParams
+from drake_tracker.core.image_step import ImageProcessor, jump_window_s
+from drake_tracker.core.robustness.health import TrackerHealth, next_health
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.sensors.timestamps import problem_kind
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.systems.image_update_worker import DeadlineWaits, submit_image_update
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
 from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
-    from drake_tracker.robot import TrackerModel
+    from drake_tracker.robot.model import TrackerModel
 
 log = logging.getLogger(__name__)
 

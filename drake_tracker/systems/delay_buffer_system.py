@@ -10,28 +10,28 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, LeafSystem
 
-from drake_tracker.core.belief_buffer import BeliefBuffer
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.core.pipeline import (
+from drake_tracker.core.filter.belief_buffer import BeliefBuffer
+from drake_tracker.core.image_step import (
     full_reading,
     image_time,
     make_bank_and_prior,
     new_belief_buffer,
     robot_joint_indices,
 )
-from drake_tracker.core.reading_gate import ReadingGate
-from drake_tracker.core.timestamps import (
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.core.sensors.reading_gate import ReadingGate
+from drake_tracker.core.sensors.timestamps import (
     StampDecision,
     StreamClock,
     follow_buffer,
     log_reanchor,
 )
-from drake_tracker.params import TrackerParams
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage, ImagePrior
 from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
-    from drake_tracker.robot import TrackerModel
+    from drake_tracker.robot.model import TrackerModel
 
 log = logging.getLogger(__name__)
 
@@ -47,7 +47,7 @@ class DelayBufferState(SharedAbstractState):
     last_reading_time_s: float = float("-inf")
     last_observation_id: int = 0
     correction: BeliefCorrection = field(default_factory=BeliefCorrection)
-    #: The readings' and images' time-stamp policy (``core/timestamps.py``), the last
+    #: The readings' and images' time-stamp policy (``core/sensors/timestamps.py``), the last
     #: image it judged and its decision.
     readings: ReadingGate | None = None
     image_clock: StreamClock | None = None
@@ -85,7 +85,7 @@ class DelayBufferSystem(LeafSystem):
     is none (no reading yet, older than the horizon, from the future).
 
     Images outside the buffer or in a gap of the readings, and readings or images whose
-    values or stamps are not usable (``core/timestamps.py``), are skipped with a logged,
+    values or stamps are not usable (``core/sensors/timestamps.py``), are skipped with a logged,
     rate-limited warning; nothing else is dropped.
     """
 

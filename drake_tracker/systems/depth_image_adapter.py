@@ -18,7 +18,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem, OutputPort
 from pydrake.systems.sensors import ImageDepth16U, ImageDepth32F
 
-from drake_tracker.core.frames import DepthFrame, depth_to_metres
+from drake_tracker.core.sensors.depth_frames import DepthFrame, depth_to_metres
 
 log = logging.getLogger(__name__)
 

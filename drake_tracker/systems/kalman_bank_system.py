@@ -17,15 +17,15 @@ from pydrake.systems.framework import (
     ValueProducer,
 )
 
-from drake_tracker.core.estimate import PoseReadout
-from drake_tracker.core.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.pipeline import full_reading, make_bank_and_prior, robot_joint_indices
-from drake_tracker.core.reading_gate import ReadingGate, is_new_stamp
-from drake_tracker.params import TrackerParams
+from drake_tracker.core.filter.estimate import PoseReadout
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.image_step import full_reading, make_bank_and_prior, robot_joint_indices
+from drake_tracker.core.sensors.reading_gate import ReadingGate, is_new_stamp
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.systems.messages import BeliefCorrection
 
 if TYPE_CHECKING:
-    from drake_tracker.robot import TrackerModel
+    from drake_tracker.robot.model import TrackerModel
 
 log = logging.getLogger(__name__)
 
@@ -89,7 +89,7 @@ class JointKalmanBankSystem(LeafSystem):
 
     ``measured_position`` holds the robot joints' readings (``model.robot_joint_names``),
     ``measurement_time`` its stamp (s; a stamp that changed marks a new reading, which
-    goes through the time-stamp policy of ``core/timestamps.py``). ``correction`` is the
+    goes through the time-stamp policy of ``core/sensors/timestamps.py``). ``correction`` is the
     delay buffer's :class:`BeliefCorrection`. Outputs cover all of ``model.joint_names``
     (virtual joints included): ``belief`` is the (5, n) moment array flattened
     row-major; ``camera_offset`` the 6 virtual joints;

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.core.angle_observation import AngleObservation
-from drake_tracker.core.belief_buffer import ImageAnchor
+from drake_tracker.core.filter.angle_observation import AngleObservation
+from drake_tracker.core.filter.belief_buffer import ImageAnchor
 
 
 @dataclass

@@ -7,8 +7,13 @@ from pydrake.common.value import AbstractValue
 from pydrake.perception import BaseField, Fields, PointCloud
 from pydrake.systems.framework import LeafSystem
 
-from drake_tracker.core.camera import CameraIntrinsics, as_intrinsics, stride_for_width, subsample
-from drake_tracker.core.frames import DepthFrame
+from drake_tracker.core.sensors.camera import (
+    CameraIntrinsics,
+    as_intrinsics,
+    stride_for_width,
+    subsample,
+)
+from drake_tracker.core.sensors.depth_frames import DepthFrame
 
 
 class DepthFrameToPointCloud(LeafSystem):

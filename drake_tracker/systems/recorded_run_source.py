@@ -6,8 +6,8 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from drake_tracker.core.frames import DepthFrame
-from drake_tracker.recording import RecordedRun
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.io.recording import RecordedRun
 
 
 class RecordedRunSource(LeafSystem):

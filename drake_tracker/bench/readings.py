@@ -1,0 +1,131 @@
+"""The encoder-rate part of ``drake-tracker bench``: what each joint reading costs the
+Simulator's thread in a Diagram.
+
+Every reading (1000 a second at the demo's encoder rate) runs two LeafSystems: the
+:class:`~drake_tracker.systems.delay_buffer_system.DelayBufferSystem` (the stamp policy,
+then the reading filtered into the buffer) and the
+:class:`~drake_tracker.systems.kalman_bank_system.JointKalmanBankSystem` (the same policy
+and filter for the present estimate). Their core is a few microseconds (``kf_step_us``);
+this measures the whole of it, Drake's event handling and the Python shells included,
+as a user's Diagram pays it. The image update is left out: its worker runs on another
+thread, and the buffer's ``image_observation`` input holds no observation.
+
+Figures: ``us_per_reading`` (CPU time of the Simulator's thread per reading, both
+systems, least of ``repeats``), the same for each system alone (``bank_us_per_reading``,
+``buffer_us_per_reading``), and ``source_us_per_reading``: the
+:class:`~drake_tracker.systems.recorded_run_source.RecordedRunSource` that plays the
+readings, evaluated by a system that does nothing else (a hardware driver has a cost of
+its own; this is the share of the figures above that is not the tracker's).
+``last_reading_filtered_s``: the stamp of the bank's latest filtered reading at the end
+(the run's last reading before its end: every reading went through).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from pydrake.common.value import AbstractValue
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
+
+from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
+from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
+from drake_tracker.systems.messages import BeliefCorrection, ImageObservationMessage
+from drake_tracker.systems.recorded_run_source import RecordedRunSource
+
+if TYPE_CHECKING:
+    from drake_tracker.io.recording import RecordedRun
+    from drake_tracker.params.tracker_params import TrackerParams
+    from drake_tracker.robot.model import TrackerModel
+
+#: Simulated seconds before the timing starts (the first readings build the belief).
+WARM_UP_S = 0.5
+
+
+class _SourceReader(LeafSystem):
+    """Reads the source's three ports at the encoder rate and does nothing else."""
+
+    def __init__(self, num_joints: int, period_s: float):
+        super().__init__()
+        self._ports = (self.DeclareVectorInputPort("measured_position", num_joints),
+                       self.DeclareVectorInputPort("measurement_time", 1),
+                       self.DeclareAbstractInputPort("depth_frame",
+                                                     AbstractValue.Make(object())))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, 0.0, self._read)
+
+    def _read(self, context, state) -> EventStatus:
+        for port in self._ports:
+            port.Eval(context)
+        return EventStatus.DidNothing()
+
+
+def _cpu_us_per_reading(run: RecordedRun, model: TrackerModel, params: TrackerParams,
+                        period_s: float, which: str) -> tuple[float, float | None]:
+    """CPU µs of this thread per reading after WARM_UP_S, for ``which`` of "both",
+    "bank", "buffer", "source"; and the stamp of the bank's latest filtered reading."""
+    builder = DiagramBuilder()
+    source = builder.AddSystem(RecordedRunSource(run))
+    sinks = []
+    if which == "source":
+        sinks.append(builder.AddSystem(_SourceReader(len(run.joint_names), period_s)))
+    if which in ("both", "buffer"):
+        buffer = builder.AddSystem(DelayBufferSystem(model, params, period_s))
+        sinks.append(buffer)
+    if which in ("both", "bank"):
+        bank = builder.AddSystem(JointKalmanBankSystem(model, params, period_s))
+        sinks.append(bank)
+        if which == "both":
+            builder.Connect(buffer.GetOutputPort("correction"), bank.GetInputPort("correction"))
+    for sink in sinks:
+        names = ("measured_position", "measurement_time") + (
+            () if isinstance(sink, JointKalmanBankSystem) else ("depth_frame",))
+        for name in names:
+            builder.Connect(source.GetOutputPort(name), sink.GetInputPort(name))
+    simulator = Simulator(builder.Build())
+    root = simulator.get_mutable_context()
+    for sink in sinks:
+        context = sink.GetMyMutableContextFromRoot(root)
+        if isinstance(sink, DelayBufferSystem):
+            sink.GetInputPort("image_observation").FixValue(context, ImageObservationMessage())
+        elif isinstance(sink, JointKalmanBankSystem) and which == "bank":
+            sink.GetInputPort("correction").FixValue(context, BeliefCorrection())
+    simulator.AdvanceTo(WARM_UP_S)
+    start = time.thread_time()
+    simulator.AdvanceTo(run.duration_s)
+    readings = (run.duration_s - WARM_UP_S) / period_s
+    cpu_us = 1e6 * (time.thread_time() - start) / readings
+    if which not in ("both", "bank"):
+        return cpu_us, None
+    return cpu_us, bank.bookkeeping(bank.GetMyContextFromRoot(root)).last_reading_s
+
+
+def bench_reading_path(run: RecordedRun, model: TrackerModel, params: TrackerParams,
+                       period_s: float, repeats: int = 3) -> dict:
+    """The figures of the module docstring on the readings of ``run`` (recorded at
+    ``period_s``), the variants taking turns ``repeats`` times (least of each)."""
+    if not run.duration_s > WARM_UP_S + 0.5:
+        raise ValueError(f"bench_reading_path needs a run longer than {WARM_UP_S + 0.5} s, "
+                         f"got {run.duration_s} s")
+    kinds = ("both", "bank", "buffer", "source")
+    timed = {kind: [] for kind in kinds}
+    for _ in range(max(1, repeats)):
+        for kind in kinds:
+            cpu_us, last_reading_s = _cpu_us_per_reading(run, model, params, period_s, kind)
+            timed[kind].append(cpu_us)
+            if kind == "both":
+                latest = last_reading_s
+    best = {kind: min(values) for kind, values in timed.items()}
+    return {"us_per_reading": best["both"], "bank_us_per_reading": best["bank"],
+            "buffer_us_per_reading": best["buffer"],
+            "source_us_per_reading": best["source"], "last_reading_filtered_s": latest,
+            "duration_s": run.duration_s, "repeats": max(1, repeats)}
+
+
+def format_reading_path(result: dict) -> str:
+    """One line: :func:`bench_reading_path`'s figures."""
+    return (f"each joint reading in a Diagram (bank and buffer systems, Drake's events "
+            f"included): {result['us_per_reading']:.0f} us of CPU (bank alone "
+            f"{result['bank_us_per_reading']:.0f}, buffer alone "
+            f"{result['buffer_us_per_reading']:.0f}; of each, the recorded source's ports "
+            f"{result['source_us_per_reading']:.0f})")

@@ -1,0 +1,1 @@
+"""The ``drake-tracker`` command line: parsing (``main``), argument checks and listings."""

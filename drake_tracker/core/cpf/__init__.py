@@ -1,0 +1,3 @@
+"""The Coordinate Particle Filter image update (paper IV-B): particles, annealed sweeps, moment
+matching.
+"""

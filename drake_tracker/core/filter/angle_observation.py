@@ -1,0 +1,109 @@
+"""An image update as a Gaussian pseudo-observation of the joint angles, and the restart
+that may replace the prior first (the delay buffer stores both: ``core/filter/belief_buffer.py``).
+
+An image update is kept as a per-joint observation in information form (``precision``,
+``information``): the likelihood implied by the CPF's moment-matched marginals relative
+to the prior they came from. Applied to that same prior it gives back exactly eq. (16);
+replayed after an earlier delayed image it stays linear-Gaussian and cheap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B, recombine_with_bias
+
+
+@dataclass(frozen=True)
+class Restart:
+    """Forgets a belief that the images showed wrong: each joint's angle goes to where
+    the encoders put it with the bias mean added back (``a + b``: for a robot joint, its
+    reading's angle at zero bias), the bias to 0, and the variances to ``angle_var`` and
+    ``bias_var`` (the tracker's start). A virtual camera joint's reading is always 0, so
+    there ``a + b`` is 0, the nominal camera, unless ``pinned_angle`` (n,) sets its angle
+    (NaN: not pinned): a pinned joint's angle mean becomes that, and its bias mean the
+    prior's ``a + b`` minus it, so the sum the readings measure is kept. Commutes with a
+    shift of the unpinned angles (the virtual joints are never shifted), so it can be
+    stored at an image's anchor."""
+
+    angle_var: np.ndarray
+    bias_var: np.ndarray
+    pinned_angle: np.ndarray | None = None
+
+    def pinned(self, angle: np.ndarray | None) -> Restart:
+        """This restart with ``pinned_angle`` = ``angle`` (None: none pinned)."""
+        return Restart(self.angle_var, self.bias_var, angle)
+
+    def apply(self, prior: np.ndarray) -> np.ndarray:
+        """The restarted (5, n) belief: angle means ``a + b`` of ``prior`` (or the pinned
+        angle), bias means 0 (or ``a + b`` minus the pinned angle), angle-bias covariances
+        0, variances ``angle_var`` and ``bias_var``."""
+        restarted = np.zeros_like(prior)
+        restarted[MEAN_A] = prior[MEAN_A] + prior[MEAN_B]
+        if self.pinned_angle is not None:
+            pin = np.isfinite(self.pinned_angle)
+            restarted[MEAN_B, pin] = restarted[MEAN_A, pin] - self.pinned_angle[pin]
+            restarted[MEAN_A, pin] = self.pinned_angle[pin]
+        restarted[VAR_A] = self.angle_var
+        restarted[VAR_B] = self.bias_var
+        return restarted
+
+
+@dataclass(frozen=True)
+class AngleObservation:
+    """A Gaussian pseudo-observation of the joint angles, in information form.
+
+    Applied to a prior with angle marginal (μ, S): posterior precision ``1/S + precision``
+    and posterior information ``μ/S + information``; the bias follows by eq. (16). With a
+    ``restart``, the prior is first replaced by ``restart.apply(prior)``.
+    """
+
+    precision: np.ndarray
+    information: np.ndarray
+    restart: Restart | None = None
+
+    @staticmethod
+    def from_posterior(prior: np.ndarray, mean_post: np.ndarray,
+                       var_post: np.ndarray) -> AngleObservation:
+        """The observation that turns ``prior`` (5, n) into angle marginals (mean, var).
+
+        Where the posterior is not tighter than the prior, the observation carries no
+        precision and only shifts the mean.
+        """
+        s_prior = prior[VAR_A]
+        mu_prior = prior[MEAN_A]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            precision = 1.0 / var_post - 1.0 / s_prior
+            tighter = np.isfinite(precision) & (precision > 0)
+            information = np.where(
+                tighter,
+                mean_post / var_post - mu_prior / s_prior,
+                np.where(s_prior > 0, (mean_post - mu_prior) / s_prior, 0.0),
+            )
+        precision = np.where(tighter, precision, 0.0)
+        return AngleObservation(precision, information)
+
+    def shifted(self, angle_shift: np.ndarray) -> AngleObservation:
+        """The same observation of ``a + angle_shift`` expressed as one of ``a``.
+
+        exp(-P (a + Δ)²/2 + I (a + Δ)) ∝ exp(-P a²/2 + (I - P Δ) a).
+        """
+        return AngleObservation(self.precision, self.information - self.precision * angle_shift,
+                                self.restart)
+
+    def apply(self, prior: np.ndarray) -> np.ndarray:
+        """The (5, n) posterior of ``prior`` (restarted first when ``restart`` is set): angle
+        marginals from the summed precision and information, the bias through eq. (16)."""
+        if self.restart is not None:
+            prior = self.restart.apply(prior)
+        s_prior = prior[VAR_A]
+        safe = s_prior > 0
+        inv_s = np.where(safe, 1.0 / np.where(safe, s_prior, 1.0), 0.0)
+        post_precision = inv_s + self.precision
+        has_info = post_precision > 0
+        var_post = np.where(has_info, 1.0 / np.where(has_info, post_precision, 1.0), s_prior)
+        mean_post = np.where(
+            has_info, var_post * (prior[MEAN_A] * inv_s + self.information), prior[MEAN_A])
+        return recombine_with_bias(prior, mean_post, var_post)

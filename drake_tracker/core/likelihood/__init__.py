@@ -1,0 +1,3 @@
+"""The occlusion-robust depth-pixel likelihood (paper eqs. 1-2) and the per-image occlusion
+estimate.
+"""

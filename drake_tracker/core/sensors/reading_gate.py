@@ -1,0 +1,148 @@
+"""The joint readings' gate: new-sample detection on a port, the time-stamp policy of
+``core/sensors/timestamps.py`` for the readings' stamps, and the values' check (a run of
+non-finite or absurd readings, an encoder gap, gets one warning when it starts and one
+info line when it ends).
+
+Its state can be written as numbers and read back (:meth:`ReadingGate.to_vector`,
+:meth:`ReadingGate.from_vector`), so that a Drake discrete update can carry it (the
+Kalman bank system does); a gate read back is silent (no logger), and takes the
+decisions of the gate it was written from.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+import math
+
+import numpy as np
+
+from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.sensors.timestamps import StreamClock, log_reanchor
+from drake_tracker.params.tracker_params import TimestampParams
+
+_log = logging.getLogger(__name__)
+
+#: A reading value beyond this (rad, or m) is skipped like a non-finite one: squared in
+#: the filter and the CPF, it would overflow (1e300 did, at the next image).
+MAX_READING_MAGNITUDE = 1e6
+
+
+def is_new_stamp(raw_s: float, last_raw_s: float) -> bool:
+    """Whether a stamp held on a port is a new sample: it differs from the last one seen
+    (NaN after NaN is the same sample)."""
+    raw, last = float(raw_s), float(last_raw_s)
+    return not (raw == last or (math.isnan(raw) and math.isnan(last)))
+
+
+class ReadingGate:
+    """The joint readings' policy: new-sample detection, the stamp's :class:`StreamClock`,
+    and one warning per run of non-finite values (an encoder gap).
+
+    ``admit`` returns the reading's time in the tracker's time base, or None when it is
+    skipped (logged through ``warnings``; ``logger=None`` keeps it quiet, for a second
+    consumer of the same stream that must take the same decisions).
+    """
+
+    def __init__(self, params: TimestampParams, joint_names: list[str],
+                 logger: logging.Logger | None = _log):
+        self.clock = StreamClock("joint reading", params)
+        self.joint_names = list(joint_names)
+        self.warnings = RateLimitedWarning(logger or _log, enabled=logger is not None)
+        self.logger = logger
+        self.last_raw_s = float("nan")
+        self.gap_start_s: float | None = None
+        self.gap_readings = 0
+        #: Whether the latest admitted reading restarted the time base
+        #: (``StampDecision.restarted``): the caller restarts its belief from it.
+        self.restarted = False
+
+    def copy(self) -> ReadingGate:
+        """An independent copy that shares the logger and joint names (see StreamClock's)."""
+        return self._with(self.clock.copy(), self.warnings.copy())
+
+    def __deepcopy__(self, memo) -> ReadingGate:
+        return self._with(copy.deepcopy(self.clock, memo), copy.deepcopy(self.warnings, memo))
+
+    def _with(self, clock: StreamClock, warnings: RateLimitedWarning) -> ReadingGate:
+        clone = object.__new__(ReadingGate)
+        clone.__dict__.update(self.__dict__)
+        clone.clock, clone.warnings = clock, warnings
+        return clone
+
+    #: Numbers in :meth:`to_vector`: the last raw stamp, whether in an encoder gap, the
+    #: gap's first stamp, readings skipped in it, whether the latest reading restarted
+    #: the stream; then the clock's (:meth:`StreamClock.to_vector`).
+    _HEAD = 5
+    VECTOR_SIZE = _HEAD + StreamClock.VECTOR_SIZE
+
+    def to_vector(self) -> np.ndarray:
+        """The gate's state as VECTOR_SIZE numbers (its warnings' counts are not kept)."""
+        in_gap = self.gap_start_s is not None
+        head = [self.last_raw_s, float(in_gap), self.gap_start_s if in_gap else math.nan,
+                float(self.gap_readings), float(self.restarted)]
+        return np.concatenate([head, self.clock.to_vector()])
+
+    @staticmethod
+    def last_raw_stamp(vector: np.ndarray) -> float:
+        """The last raw stamp seen by the gate that :meth:`to_vector` wrote as
+        ``vector`` (NaN before any), without reading the rest back."""
+        return float(vector[0])
+
+    @staticmethod
+    def from_vector(vector: np.ndarray, params: TimestampParams,
+                    joint_names: list[str]) -> ReadingGate:
+        """A silent gate (no logger) in the state that :meth:`to_vector` wrote as
+        ``vector``. Raises ValueError for a vector of the wrong size."""
+        x = np.asarray(vector, dtype=float).ravel()
+        if x.shape != (ReadingGate.VECTOR_SIZE,):
+            raise ValueError(f"a reading gate's state has {ReadingGate.VECTOR_SIZE} "
+                             f"numbers, got {x.shape}")
+        gate = ReadingGate(params, joint_names, logger=None)
+        last_raw, in_gap, gap_start, gap_readings, restarted = x[:ReadingGate._HEAD].tolist()
+        gate.last_raw_s = last_raw
+        gate.gap_start_s = gap_start if in_gap else None
+        gate.gap_readings, gate.restarted = int(gap_readings), bool(restarted)
+        gate.clock.restore(x[ReadingGate._HEAD:])
+        return gate
+
+    def is_new(self, raw_s: float) -> bool:
+        """Whether a stamp held on a port is a new sample (differs from the last seen)."""
+        return is_new_stamp(raw_s, self.last_raw_s)
+
+    def admit(self, raw_s: float, values: np.ndarray) -> float | None:
+        """The reading's time in the tracker's time base, or None (skipped, logged)."""
+        self.last_raw_s = float(raw_s)
+        self.restarted = False
+        # NaN, ±inf, absurd values: a plain loop over the few joints is the fast check.
+        if not all(abs(v) <= MAX_READING_MAGNITUDE for v in np.ravel(values).tolist()):
+            with np.errstate(invalid="ignore"):
+                bad = ~(np.abs(values) <= MAX_READING_MAGNITUDE)
+            if self.gap_start_s is None:
+                self.gap_start_s = float(raw_s)
+                names = [n for n, b in zip(self.joint_names, bad, strict=True) if b]
+                if self.logger:
+                    self.logger.warning(
+                        "joint reading stamped %.4f s is not finite (%s; or beyond "
+                        "±1e6, which overflows the filter): readings are skipped until "
+                        "they are finite again (one warning per gap)",
+                        raw_s, ", ".join(names))
+            self.gap_readings += 1
+            return None
+        decision = self.clock.check(raw_s)
+        if decision.time_s is None:
+            self.warnings.warn(decision.kind, f"joint reading skipped: {decision.problem}")
+            return None
+        self.restarted = decision.restarted
+        if decision.restarted and self.logger:
+            self.logger.warning("joint reading clock restarted at %.4f s: the few stamps "
+                                "accepted before were not followed by the stream; the "
+                                "estimate restarts from this reading", raw_s)
+        if self.gap_start_s is not None:
+            if self.logger:
+                self.logger.info("joint readings finite again at %.4f s after %d skipped "
+                                 "from %.4f s", raw_s, self.gap_readings, self.gap_start_s)
+            self.gap_start_s, self.gap_readings = None, 0
+        if decision.reanchored_by_s is not None and self.logger:
+            log_reanchor(self.logger, "joint reading", decision, raw_s, self.clock)
+        return decision.time_s

@@ -1,0 +1,1 @@
+"""SIMD across particles: numba intrinsics that work on 8 particles (lanes) at once."""

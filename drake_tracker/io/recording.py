@@ -1,0 +1,169 @@
+"""The recorded-run format: everything the offline tracker replays, plus ground truth.
+
+A run is one compressed NumPy archive (``.npz``) with these arrays (n measured joints,
+R readings, I images of H x W pixels, T ground-truth samples):
+
+========================== =============== ==============================================
+key                        shape / dtype    meaning
+========================== =============== ==============================================
+``format_version``         () int           1
+``robot_config_yaml``      () str           the RobotConfig, as YAML
+``scenario_yaml``          () str           the scenario that produced it, as YAML ('' if none)
+``joint_names``            (n,) str         the measured joints, in reading order
+``reading_times_s``        (R,) float64     encoder sample times, strictly increasing
+``readings_rad``           (R, n) float64   encoder readings (rad, or m for prismatic)
+``image_capture_times_s``  (I,) float64     when each depth image was taken
+``image_arrival_times_s``  (I,) float64     when it reached the tracker (>= capture time)
+``depth_images_m``         (I, H, W) f32    depth along the optical axis (m); NaN = invalid
+``camera_intrinsics``      (6,) float64     width, height, fx, fy, cx, cy of the stored images
+``truth_times_s``          (T,) float64     ground-truth sample times
+``truth_positions_rad``    (T, n) float64   true joint angles
+``truth_bias_rad``         (T, n) float64   true encoder bias (reading minus angle, noise-free)
+``truth_camera_offset``    (T, 6) float64   true camera offset [x y z (m), rx ry rz (rad)]
+``truth_X_CE``             (T, 4, 4)        true hand pose in the true camera frame
+========================== =============== ==============================================
+
+Images are stored already subsampled (see ``image_stride`` of ``drake-tracker record``);
+the intrinsics are those of the stored images.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+
+FORMAT_VERSION = 1
+
+
+@dataclass
+class RecordedRun:
+    """A recorded run in memory; see the module docstring for the fields."""
+
+    robot_config_yaml: str
+    joint_names: list[str]
+    reading_times_s: np.ndarray
+    readings_rad: np.ndarray
+    image_capture_times_s: np.ndarray
+    image_arrival_times_s: np.ndarray
+    depth_images_m: np.ndarray
+    camera_intrinsics: CameraIntrinsics
+    truth_times_s: np.ndarray
+    truth_positions_rad: np.ndarray
+    truth_bias_rad: np.ndarray
+    truth_camera_offset: np.ndarray
+    truth_X_CE: np.ndarray
+    scenario_yaml: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raises ValueError naming the first inconsistent field."""
+        n = len(self.joint_names)
+        R = len(self.reading_times_s)
+        if self.readings_rad.shape != (R, n):
+            raise ValueError(f"readings_rad has shape {self.readings_rad.shape}, expected {(R, n)}")
+        if R > 1 and not np.all(np.diff(self.reading_times_s) > 0):  # NaN fails too
+            k = int(np.flatnonzero(~(np.diff(self.reading_times_s) > 0))[0]) + 1
+            raise ValueError(
+                f"reading_times_s must be strictly increasing and finite: reading {k} is "
+                f"stamped {float(self.reading_times_s[k])!r} s after "
+                f"{float(self.reading_times_s[k - 1])!r} s "
+                f"(a recorded log is replayed in stamp order; the live Tracker skips such "
+                f"a reading with a warning)")
+        num_images = len(self.image_capture_times_s)
+        if len(self.image_arrival_times_s) != num_images:
+            raise ValueError("image_arrival_times_s and image_capture_times_s differ in length")
+        if np.any(self.image_arrival_times_s < self.image_capture_times_s):
+            raise ValueError("an image arrives before it was captured")
+        cam = self.camera_intrinsics
+        if self.depth_images_m.shape != (num_images, cam.height, cam.width):
+            raise ValueError(
+                f"depth_images_m has shape {self.depth_images_m.shape}, expected "
+                f"{(num_images, cam.height, cam.width)} from the intrinsics"
+            )
+        T = len(self.truth_times_s)
+        for name, shape in (
+            ("truth_positions_rad", (T, n)),
+            ("truth_bias_rad", (T, n)),
+            ("truth_camera_offset", (T, 6)),
+            ("truth_X_CE", (T, 4, 4)),
+        ):
+            if getattr(self, name).shape != shape:
+                raise ValueError(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
+
+    @property
+    def duration_s(self) -> float:
+        """The last ground-truth time (s); 0 for a run without ground truth."""
+        return float(self.truth_times_s[-1]) if len(self.truth_times_s) else 0.0
+
+    def save(self, path: str | Path) -> Path:
+        """Writes the run to ``path`` as a compressed ``.npz`` (the keys of the module doc;
+        ``extra`` is not stored), creating its folder; returns the path written, with ``.npz``
+        appended when missing."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(
+            path,
+            format_version=np.array(FORMAT_VERSION),
+            robot_config_yaml=np.array(self.robot_config_yaml),
+            scenario_yaml=np.array(self.scenario_yaml),
+            joint_names=np.array(self.joint_names),
+            reading_times_s=self.reading_times_s,
+            readings_rad=self.readings_rad,
+            image_capture_times_s=self.image_capture_times_s,
+            image_arrival_times_s=self.image_arrival_times_s,
+            depth_images_m=self.depth_images_m.astype(np.float32),
+            camera_intrinsics=self.camera_intrinsics.as_array(),
+            truth_times_s=self.truth_times_s,
+            truth_positions_rad=self.truth_positions_rad,
+            truth_bias_rad=self.truth_bias_rad,
+            truth_camera_offset=self.truth_camera_offset,
+            truth_X_CE=self.truth_X_CE,
+        )
+        # np.savez appends .npz when missing.
+        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+    @staticmethod
+    def load(path: str | Path) -> RecordedRun:
+        """Reads a run written by :meth:`save`; a file that is not one raises ValueError
+        naming it (FileNotFoundError when there is none)."""
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"recorded run '{path}' does not exist")
+        if not zipfile.is_zipfile(path):  # numpy would try it as a pickle
+            raise ValueError(f"{path}: not a recorded run: not a .npz (zip) archive, or a "
+                             f"truncated one")
+        try:
+            return RecordedRun._load(path)
+        except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as err:
+            raise ValueError(f"{path}: not a readable recorded run (a .npz written by "
+                             f"drake-tracker record): {type(err).__name__}: {err}") from err
+
+    @staticmethod
+    def _load(path: str | Path) -> RecordedRun:
+        with np.load(path, allow_pickle=False) as data:
+            version = int(data["format_version"])
+            if version != FORMAT_VERSION:
+                raise ValueError(f"{path}: format_version {version}, expected {FORMAT_VERSION}")
+            return RecordedRun(
+                robot_config_yaml=str(data["robot_config_yaml"]),
+                scenario_yaml=str(data["scenario_yaml"]),
+                joint_names=[str(s) for s in data["joint_names"]],
+                reading_times_s=data["reading_times_s"],
+                readings_rad=data["readings_rad"],
+                image_capture_times_s=data["image_capture_times_s"],
+                image_arrival_times_s=data["image_arrival_times_s"],
+                depth_images_m=data["depth_images_m"],
+                camera_intrinsics=CameraIntrinsics.from_array(data["camera_intrinsics"]),
+                truth_times_s=data["truth_times_s"],
+                truth_positions_rad=data["truth_positions_rad"],
+                truth_bias_rad=data["truth_bias_rad"],
+                truth_camera_offset=data["truth_camera_offset"],
+                truth_X_CE=data["truth_X_CE"],
+            )

@@ -1,0 +1,199 @@
+"""Replaying a recorded run through the offline tracker, and ``drake-tracker track``.
+
+Events are fed in the order a live tracker receives them: each reading at its stamp,
+each image at its arrival time (readings stamped at or before an image's arrival come
+first). Bad samples are skipped with a warning that names their time, and the replay
+finishes: readings by the tracker's time-stamp policy (``core/sensors/timestamps.py``), images
+that raise (malformed, or not in metres) here. Estimates are sampled after the last
+reading at or before each ground-truth time.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from drake_tracker.core.filter.estimate import PoseReadout
+from drake_tracker.core.image_step import full_reading
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.io.recording import RecordedRun
+from drake_tracker.metrics import format_report_table, method_report
+from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
+from drake_tracker.progress import count_bar
+from drake_tracker.robot.model import (
+    RobotConfig,
+    TrackerModel,
+    build_tracker_model,
+    load_robot_config,
+)
+from drake_tracker.tracker import Tracker
+
+if TYPE_CHECKING:
+    import argparse
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ReplayResult:
+    """Estimates sampled at ``times_s`` (the run's ground-truth times)."""
+
+    times_s: np.ndarray
+    positions: np.ndarray  # (T, n) all model joints
+    position_variances: np.ndarray
+    biases: np.ndarray
+    camera_offsets: np.ndarray  # (T, 6)
+    X_CE: np.ndarray  # (T, 4, 4)
+    joint_names: list[str]
+    num_images_applied: int
+    #: Frames not processed (not due at ``min_image_interval_s``, or unusable).
+    num_images_skipped: int
+    image_update_s: list[float]
+    wall_time_s: float
+
+
+def robot_config_from_yaml(text: str) -> RobotConfig:
+    """The RobotConfig stored in a recorded run."""
+    return load_robot_config(text)
+
+
+def model_for_run(run: RecordedRun) -> TrackerModel:
+    """The TrackerModel of the robot ``run`` was recorded with (its stored RobotConfig)."""
+    return build_tracker_model(robot_config_from_yaml(run.robot_config_yaml))
+
+
+def replay_run(run: RecordedRun, params: TrackerParams | None = None,
+               model: TrackerModel | None = None,
+               sample_times_s: np.ndarray | None = None,
+               progress: bool = False,
+               on_image: Callable[[Tracker, DepthFrame], None] | None = None
+               ) -> ReplayResult:
+    """Replays ``run`` through a fresh :class:`Tracker` and samples its estimates;
+    ``progress`` shows a bar of the images fed (stderr); ``on_image(tracker, frame)`` is
+    called after each image the tracker accepted (to trace it; an exception it raises
+    ends the replay and reaches the caller)."""
+    model = model if model is not None else model_for_run(run)
+    if list(run.joint_names) != list(model.robot_joint_names):
+        raise ValueError(f"the run's joints {run.joint_names} differ from the model's "
+                         f"{model.robot_joint_names}")
+    tracker = Tracker(model, run.camera_intrinsics, params)
+    times = run.truth_times_s if sample_times_s is None else np.asarray(sample_times_s)
+    n = model.num_joints
+    out_q = np.full((len(times), n), np.nan)
+    out_var = np.full((len(times), n), np.nan)
+    out_b = np.full((len(times), n), np.nan)
+    out_X = np.full((len(times), 4, 4), np.nan)
+    image_order = np.argsort(run.image_arrival_times_s, kind="stable")
+    next_image = 0
+    next_sample = 0
+    skipped_images = 0
+    warnings = RateLimitedWarning(log)
+    t_start = time.perf_counter()
+    bar = count_bar(len(image_order), "image", "tracking", enabled=progress)
+
+    def sample_until(t_limit: float) -> None:
+        nonlocal next_sample
+        while next_sample < len(times) and times[next_sample] < t_limit:
+            if tracker.started:
+                e = tracker.estimate()
+                out_q[next_sample], out_var[next_sample] = e.positions, e.position_variances
+                out_b[next_sample], out_X[next_sample] = e.biases, e.X_CE
+            next_sample += 1
+
+    for k, t in enumerate(run.reading_times_s):
+        while (next_image < len(image_order)
+               and run.image_arrival_times_s[image_order[next_image]] < t):
+            i = image_order[next_image]
+            sample_until(run.image_arrival_times_s[i])
+            frame = DepthFrame(float(run.image_capture_times_s[i]),
+                               float(run.image_arrival_times_s[i]), run.depth_images_m[i],
+                               int(i))
+            try:
+                tracker.add_image(frame)
+            except ValueError as err:
+                skipped_images += 1
+                warnings.warn("unusable images", f"image {i} captured at "
+                              f"{run.image_capture_times_s[i]:.4f} s skipped: {err}")
+            else:
+                if on_image is not None:
+                    on_image(tracker, frame)
+            next_image += 1
+            bar.update(1)
+        sample_until(t)
+        tracker.add_reading(float(t), run.readings_rad[k])
+    sample_until(np.inf)
+    bar.close()
+    virtual = model.virtual_joint_indices
+    return ReplayResult(
+        times_s=np.asarray(times), positions=out_q, position_variances=out_var, biases=out_b,
+        camera_offsets=out_q[:, virtual], X_CE=out_X, joint_names=list(model.joint_names),
+        num_images_applied=tracker.num_images_applied,
+        num_images_skipped=tracker.num_images_skipped + skipped_images,
+        image_update_s=list(tracker.images.update.times.per_update) if tracker.images else [],
+        wall_time_s=time.perf_counter() - t_start,
+    )
+
+
+def readings_at(run: RecordedRun, times_s: np.ndarray) -> np.ndarray:
+    """(T, n) the latest reading stamped at or before each time (NaN before the first)."""
+    k = np.searchsorted(run.reading_times_s, np.asarray(times_s) + 1e-9, side="right") - 1
+    out = np.full((len(k), len(run.joint_names)), np.nan)
+    out[k >= 0] = run.readings_rad[k[k >= 0]]
+    return out
+
+
+def encoders_only_X_CE(run: RecordedRun, model: TrackerModel | None = None) -> np.ndarray:
+    """The baseline: forward kinematics of the latest raw reading at each truth time,
+    with the nominal camera (virtual joints at 0). (T, 4, 4); NaN before any reading."""
+    model = model if model is not None else model_for_run(run)
+    readings = readings_at(run, run.truth_times_s)
+    out = np.full((len(readings), 4, 4), np.nan)
+    ok = np.all(np.isfinite(readings), axis=1)
+    if ok.any():
+        q = np.array([full_reading(model, r) for r in readings[ok]])
+        out[ok] = PoseReadout(model).poses(q)[0]
+    return out
+
+
+def run_report(run: RecordedRun, estimates: dict[str, np.ndarray]) -> dict:
+    """``{"methods": {name: {"translation_mm": {...}, "rotation_deg": {...}}}}``, comparing
+    each method's X_CE with the ground truth at the samples where both are defined."""
+    report = {"methods": {}}
+    for name, X in estimates.items():
+        ok = np.all(np.isfinite(X.reshape(len(X), -1)), axis=1)
+        report["methods"][name] = method_report(X[ok], run.truth_X_CE[ok])
+    return report
+
+
+def run_track(args: argparse.Namespace, run: RecordedRun | None = None,
+              params: TrackerParams | None = None, model: TrackerModel | None = None) -> int:
+    """``drake-tracker track --run FILE [--params YAML] [--out DIR]``; ``run``,
+    ``params`` and ``model``, when given, were already loaded from those arguments."""
+    run = run if run is not None else RecordedRun.load(args.run)
+    params = params if params is not None else load_tracker_params(args.params)
+    model = model if model is not None else model_for_run(run)
+    result = replay_run(run, params, model, progress=True)
+    report = run_report(run, {"encoders_only": encoders_only_X_CE(run, model),
+                              "full_fusion": result.X_CE})
+    updates = np.array(result.image_update_s)
+    report["images_applied"] = result.num_images_applied
+    report["images_skipped"] = result.num_images_skipped
+    report["replay_wall_time_s"] = result.wall_time_s
+    report["image_update_ms_median"] = float(1e3 * np.median(updates)) if len(updates) else None
+    print(format_report_table(report))
+    print(f"replayed {run.duration_s:.1f} s of data in {result.wall_time_s:.1f} s; "
+          f"{result.num_images_applied} images applied, {result.num_images_skipped} skipped")
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.json").write_text(json.dumps(report, indent=2))
+        print(f"wrote {out / 'report.json'}")
+    return 0

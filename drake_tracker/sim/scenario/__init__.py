@@ -1,0 +1,1 @@
+"""Scenarios: the dataclasses, their checks, the named presets and shortening."""
