@@ -5,44 +5,49 @@ for Robot Manipulation" (RA-L 2017): a per-joint Kalman bank on (angle, bias), a
 Coordinate Particle Filter depth-image update, six virtual camera joints, and a
 delay buffer for late images.
 
-The public API (imported lazily, so ``import drake_tracker`` stays cheap)::
+The layers, each importing only those before it: ``robot`` (the model, one source of
+truth), ``core`` (the functional core: plain functions and small classes over numpy,
+numba kernels), ``params`` (YAML dataclasses, checked and resolved once into the
+core's ``ResolvedParams``), then the shells over one per-image step
+(``core/image_step.py``): the offline ``Tracker`` and the Drake ``systems``; ``io``
+(recorded runs); and the applications ``sim``, ``cli``, ``demo``, ``bench``,
+``evaluation``, ``servo``. The public API::
 
     from drake_tracker import AddTracker, RobotConfig, TrackerParams, build_tracker_model
 """
 
-import importlib
-
-from drake_tracker.systems import _PUBLIC as _SYSTEMS
+from drake_tracker.core.resolved_params import ResolvedParams
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.params import load_tracker_params, resolve_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.robot.model import (
+    FrameOffset,
+    RobotConfig,
+    TrackerModel,
+    build_tracker_model,
+    default_home_positions,
+    load_robot_config,
+)
+from drake_tracker.systems import (
+    AddImageStamper,
+    AddTracker,
+    CpfImageUpdateSystem,
+    DelayBufferSystem,
+    DepthFrameToPointCloud,
+    DepthImageToFrame,
+    ImageStamper,
+    JointKalmanBankSystem,
+    TrackerSystems,
+)
+from drake_tracker.tracker import Tracker
 
 __version__ = "0.1.0"
 
-#: Public name -> module that defines it: the systems, and the rest of the API.
-_PUBLIC = {
-    **_SYSTEMS,
-    "Tracker": "drake_tracker.tracker",
-    "TrackerParams": "drake_tracker.params.tracker_params",
-    "load_tracker_params": "drake_tracker.params.tracker_params",
-    "RobotConfig": "drake_tracker.robot.model",
-    "FrameOffset": "drake_tracker.robot.model",
-    "TrackerModel": "drake_tracker.robot.model",
-    "build_tracker_model": "drake_tracker.robot.model",
-    "load_robot_config": "drake_tracker.robot.model",
-    "default_home_positions": "drake_tracker.robot.model",
-    "CameraIntrinsics": "drake_tracker.core.sensors.camera",
-    "DepthFrame": "drake_tracker.core.sensors.depth_frames",
-}
-
-__all__ = ["__version__", *_PUBLIC]
-
-
-def __getattr__(name: str):
-    """Imports a public name from its module on first use."""
-    if name not in _PUBLIC:
-        raise AttributeError(f"module 'drake_tracker' has no attribute '{name}'")
-    value = getattr(importlib.import_module(_PUBLIC[name]), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_PUBLIC))
+__all__ = ["__version__", "AddImageStamper", "AddTracker", "CameraIntrinsics",
+           "CpfImageUpdateSystem", "DelayBufferSystem", "DepthFrame",
+           "DepthFrameToPointCloud", "DepthImageToFrame", "FrameOffset", "ImageStamper",
+           "JointKalmanBankSystem", "ResolvedParams", "RobotConfig", "Tracker",
+           "TrackerModel", "TrackerParams", "TrackerSystems", "build_tracker_model",
+           "default_home_positions", "load_robot_config", "load_tracker_params",
+           "resolve_tracker_params"]

@@ -1,6 +1,9 @@
-"""Progress bars of the long commands (tqdm, on stderr so stdout keeps the results)."""
+"""What the long commands show on stderr, so stdout keeps the results: progress bars
+(tqdm) and one-line notes."""
 
 from __future__ import annotations
+
+import sys
 
 from tqdm import tqdm
 
@@ -41,3 +44,8 @@ def count_bar(total: int, unit: str, description: str, enabled: bool = True) -> 
     """A bar over ``total`` items (images, readings); ``update(k)`` as they are done."""
     return tqdm(total=int(total), desc=description, unit=unit, disable=not enabled,
                 mininterval=0.5, dynamic_ncols=True)
+
+
+def note(message: str) -> None:
+    """A one-line note for the user on stderr (stdout keeps the results)."""
+    print(f"note: {message}", file=sys.stderr)

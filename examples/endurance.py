@@ -29,7 +29,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_tracker.demo.run import DEFAULT_SCENARIO, render_what_the_tracker_reads
 from drake_tracker.metrics import pose_errors
-from drake_tracker.params.tracker_params import load_tracker_params
+from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.sim.scenario.load import load_scenario
 from drake_tracker.sim.world import AddSimulatedWorld
 from drake_tracker.systems.add_tracker import AddTracker
@@ -72,9 +72,10 @@ def main() -> int:
     scenario = render_what_the_tracker_reads(scenario, params)
     builder = DiagramBuilder()
     world = AddSimulatedWorld(builder, scenario)
-    tracker = AddTracker(builder, world.model, world.intrinsics, params,
-                         world.port("measured_position"), world.port("measurement_time"),
-                         world.port("depth_frame"), world.encoder_period_s)
+    tracker = AddTracker(builder, model=world.model, camera=world.intrinsics, params=params,
+                         measured_position=world.port("measured_position"),
+                         measurement_time=world.port("measurement_time"),
+                         depth=world.port("depth_frame"), encoder_period_s=world.encoder_period_s)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()

@@ -241,10 +241,9 @@ DIAGRAM_JUDGED_FROM_S, DIAGRAM_END_S = 0.99, 1.19
 def diagram_outcome(bench, stamps=None, sequences=None, arrivals=None, readings=None,
                     images=None) -> tuple[np.ndarray, int]:
     """The Diagram (``AddTracker`` on a recorded-run source with these faults) run to
-    the end of the run (1.2 s; the faults are all before 0.6 s): the median of the hand's
-    translation error (mm) over its last 0.2 s, sampled every 10 ms, and the number of
-    images applied. (Judged at one sample 0.4 s after the fault, while the tracker was
-    still converging, a fault that delays convergence looked like lost data.)"""
+    the end of the run (1.2 s; the faults are all before 0.6 s): the median hand error
+    (mm) over its last 0.2 s, sampled every 10 ms, and the number of images applied.
+    (One sample 0.4 s after the fault made a slower convergence look like lost data.)"""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
 
@@ -272,10 +271,11 @@ def diagram_outcome(bench, stamps=None, sequences=None, arrivals=None, readings=
 
     builder = DiagramBuilder()
     source = builder.AddSystem(FaultySource(run))
-    tracker = AddTracker(builder, bench.model, run.camera_intrinsics, small_params(),
-                         source.GetOutputPort("measured_position"),
-                         source.GetOutputPort("measurement_time"),
-                         source.GetOutputPort("depth_frame"), encoder_period_s=0.005)
+    tracker = AddTracker(builder, model=bench.model, camera=run.camera_intrinsics,
+                         params=small_params(),
+                         measured_position=source.GetOutputPort("measured_position"),
+                         measurement_time=source.GetOutputPort("measurement_time"),
+                         depth=source.GetOutputPort("depth_frame"), encoder_period_s=0.005)
     simulator = Simulator(builder.Build())
     context = simulator.get_mutable_context()
     errors = []

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_tracker.io.recording import RecordedRun
-from drake_tracker.params.tracker_params import load_tracker_params
+from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.sim.scenario.load import load_scenario
 
 #: (YAML path of a TrackerParams field, bad values): each value written alone.

@@ -35,9 +35,11 @@ def run_one(seed: int, latency_s: float, duration_s: float) -> tuple[list[float]
     scenario = render_what_the_tracker_reads(scenario, params)
 
     def add_tracker(builder, world):
-        tracker = AddTracker(builder, world.model, world.intrinsics, params,
-                             world.port("measured_position"), world.port("measurement_time"),
-                             world.port("depth_frame"), world.encoder_period_s)
+        tracker = AddTracker(builder, model=world.model, camera=world.intrinsics, params=params,
+                             measured_position=world.port("measured_position"),
+                             measurement_time=world.port("measurement_time"),
+                             depth=world.port("depth_frame"),
+                             encoder_period_s=world.encoder_period_s)
         return {"X_CE": tracker.port("X_CE")}
 
     run = simulate_and_record(scenario, duration_s=duration_s,

@@ -21,7 +21,8 @@ from pydrake.common.yaml import yaml_load
 from drake_tracker.io.recording import RecordedRun
 from drake_tracker.io.replay import encoders_only_X_CE, model_for_run, replay_run
 from drake_tracker.metrics import percentile_summary, pose_errors
-from drake_tracker.params.tracker_params import TrackerParams, validate_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.params.validation import validate_tracker_params
 
 
 def truncate(run: RecordedRun, duration_s: float) -> RecordedRun:

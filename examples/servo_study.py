@@ -55,8 +55,8 @@ def build(config: ServoStudyConfig, feedback: str, scenario, params: TrackerPara
         builder.Connect(world.ports["measured_position"], fk.get_input_port(0))
         X_CE, joints = fk.GetOutputPort("X_CE"), world.ports["measured_position"]
     elif feedback == "tracker":  # (b) drake_tracker next to the plant and the camera
-        tracker = AddTracker(builder, world.model, camera_model(scenario), params,
-                             measured_position=world.ports["measured_position"],
+        tracker = AddTracker(builder, model=world.model, camera=camera_model(scenario),
+                             params=params, measured_position=world.ports["measured_position"],
                              measurement_time=world.ports["measurement_time"],
                              depth=world.ports["depth_frame"],
                              encoder_period_s=world.encoder_period_s)

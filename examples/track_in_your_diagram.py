@@ -167,8 +167,8 @@ def build(depth: str = "32F", duration_s: float = 4.0, seed: int = 0,
                                                  robot.biased))
     builder.Connect(motion.get_output_port(), encoders.get_input_port(0))
 
-    tracker = AddTracker(builder, model, sensor.default_depth_render_camera(),
-                         params or TrackerParams(),
+    tracker = AddTracker(builder, model=model, camera=sensor.default_depth_render_camera(),
+                         params=params or TrackerParams(),
                          measured_position=encoders.GetOutputPort("measured_position"),
                          measurement_time=encoders.GetOutputPort("measurement_time"),
                          depth=stamper.GetOutputPort("image"),

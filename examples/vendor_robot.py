@@ -34,7 +34,8 @@ from drake_tracker import (
     build_tracker_model,
     default_home_positions,
 )
-from drake_tracker.core.render.backends import make_renderer, random_configurations
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import random_configurations
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 
 PANDA_URDF = "package://example-robot-data/robots/panda_description/urdf/panda.urdf"

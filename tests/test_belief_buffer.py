@@ -145,11 +145,8 @@ def _bias_after_images(phase: float, num_images: int = 30) -> float:
     """Issue 10's case: 1 kHz readings of a joint at angle 0 with a 0.15 rad bias, and
     ideal images (angle 0, std 0.005 rad) at 10 Hz, ``phase`` encoder periods off the grid,
     each arriving 20 ms late; default tracker parameters."""
-    from drake_tracker.params.tracker_params import (
-        TrackerParams,
-        joint_noise_for,
-        resolve_kalman_params,
-    )
+    from drake_tracker.params.resolve import joint_noise_for, resolve_kalman_params
+    from drake_tracker.params.tracker_params import TrackerParams
 
     params = TrackerParams()
     bank = JointKalmanBank(resolve_kalman_params(params, ["j"]))

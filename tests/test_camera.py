@@ -3,7 +3,8 @@ intrinsics equals its full-resolution render subsampled."""
 
 import numpy as np
 
-from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.sensors.camera import CameraIntrinsics, subsample
 from drake_tracker.robot.model import build_tracker_model, robot_preset
 

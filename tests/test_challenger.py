@@ -10,12 +10,12 @@ import logging
 
 import numpy as np
 import pytest
-from fast_params import small_params
-from test_restart import CAMERA, assert_restarts_alike_offline_and_in_the_diagram, hand_error_mm
+from test_restart import CAMERA, hand_error_mm
 from test_second_opinion import prior_at, scene  # noqa: F401  (the fixture)
 
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A
-from drake_tracker.core.image_step import ImageProcessor, full_reading
+from drake_tracker.core.filter.start import full_reading
+from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.robustness.health import (
     Challenger,
     HealthParams,
@@ -27,6 +27,7 @@ from drake_tracker.core.robustness.second_opinion import (
     implausible_biases,
     plausible_bias_std,
 )
+from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 
 #: A bend far beyond the bias model (23 deg is the default's trigger).
@@ -104,7 +105,7 @@ def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(sce
     prior[VAR_A] = np.radians(0.05) ** 2
     params = TrackerParams()
     params.health.second_opinion_agreement = 0.0
-    processor = ImageProcessor(model, CAMERA, params)
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     assert implausible_biases(prior, processor.search.plausible_std, 2.25).any()
     encoders = hand_error_mm(model, truth, full_reading(model, reading))
     start = hand_error_mm(model, truth, prior[MEAN_A])
@@ -115,7 +116,8 @@ def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(sce
     assert outcomes[-1].challenger is None  # it won: none is left
     after = hand_error_mm(model, truth, outcomes[-1].observation.apply(prior)[MEAN_A])
     params.health.challenger_bias_sigmas = 0.0
-    alone = run_images(ImageProcessor(model, CAMERA, params), frame, prior, len(outcomes),
+    alone = run_images(ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)), frame,
+    prior, len(outcomes),
                        0.0)
     assert not any(o.restarted for o in alone) and all(o.challenger is None for o in alone)
     stuck = hand_error_mm(model, truth, alone[-1].observation.apply(prior)[MEAN_A])
@@ -127,7 +129,7 @@ def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(sce
 def test_a_plausible_estimate_starts_no_challenger(scene):  # noqa: F811
     model, truth, reading, frame = scene
     prior = prior_at(model, reading, truth)  # biases of 3 deg
-    outcome = ImageProcessor(model, CAMERA, TrackerParams()).observe(
+    outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(), model)).observe(
         frame, prior, 0.1, TrackerHealth(acquired=True))
     assert outcome.challenger is None and not outcome.restarted
 
@@ -143,24 +145,14 @@ def test_a_challenger_rests_as_long_as_it_searched(scene):  # noqa: F811
     params.health.second_opinion_margin_nats = 1e5
     params.health.challenger_images = 2
     params.image.acquisition_num_particles = 10
-    outcomes = run_images(ImageProcessor(model, CAMERA, params), frame, prior, 6)
+    outcomes = run_images(ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)),
+    frame, prior, 6)
     images = [o.challenger.images for o in outcomes]
     assert images == [1, 2, 3, 4, 1, 2]
     searched = [o.challenger.offset_mean for o in outcomes]
     assert not np.array_equal(searched[0], searched[1])  # searching: it moves
     np.testing.assert_array_equal(searched[1], searched[2])  # resting: it stays
     np.testing.assert_array_equal(searched[2], searched[3])
-
-
-def test_a_challenger_gives_the_same_estimates_offline_and_in_the_diagram(apollo, caplog):
-    """Forced: any bias beyond 0.01 of the spread is implausible and any gain is
-    adopted; the update has 5 particles against the challenger's 150."""
-    p = small_params()
-    p.health.second_opinion_agreement = 0.0
-    p.health.challenger_bias_sigmas, p.health.second_opinion_margin_nats = 0.01, 0.0
-    p.image.num_particles = 5
-    assert_restarts_alike_offline_and_in_the_diagram(
-        apollo, p, 0.5, caplog, "a challenger searched from the encoders' arm")
 
 
 def test_an_estimate_out_of_view_is_challenged_at_the_first_image(apollo_out_of_view):
@@ -170,7 +162,7 @@ def test_an_estimate_out_of_view_is_challenged_at_the_first_image(apollo_out_of_
     encoders' at once (one image from there is not an acquisition, as in the restart's
     test)."""
     model, truth, frame, prior = apollo_out_of_view
-    processor = ImageProcessor(model, CAMERA, TrackerParams())
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(), model))
     outcome = processor.observe(frame, prior, 0.1, TrackerHealth(acquired=True))
     assert outcome.restarted and outcome.challenger is None
     encoders = hand_error_mm(model, truth, processor.restart.apply(prior)[MEAN_A])

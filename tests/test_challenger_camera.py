@@ -21,10 +21,13 @@ from test_second_opinion import ENCODER_BIAS_DEG
 
 from drake_tracker.core.filter.angle_observation import Restart
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.filter.start import full_reading, new_bank_and_belief
+from drake_tracker.core.image_processor import ImageProcessor
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.robustness.health import TrackerHealth, next_health
 from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.robot.model import build_tracker_model, robot_preset
 
@@ -84,7 +87,7 @@ def offset_scene():
     for name, deg in BEND_DEG.items():
         q[model.joint_names.index(name)] += np.radians(deg)
     q[virtual] = TRUE_CAMERA  # a restart alone sends it to the nominal camera
-    _, prior = make_bank_and_prior(model, TrackerParams(), reading)
+    _, prior = new_bank_and_belief(resolve_tracker_params(TrackerParams(), model), reading)
     prior[MEAN_A] = q
     prior[MEAN_B] = full_reading(model, reading) - q  # the readings measure a + b
     prior[VAR_A] = np.radians(0.05) ** 2
@@ -98,7 +101,7 @@ def challenge(model, prior, frame, images: int, keep_camera: bool):
     (the code before)."""
     params = TrackerParams()
     params.health.second_opinion_agreement = 0.0
-    processor = ImageProcessor(model, CAMERA, params)
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     if not keep_camera:
         processor.search.restarts = lambda prior: [processor.restart]
     health = TrackerHealth(acquired=True)
@@ -144,7 +147,7 @@ def test_the_searches_start_from_the_nominal_camera_and_from_the_estimates(offse
     it is."""
     model, _, prior, _ = offset_scene
     virtual = list(model.virtual_joint_indices)
-    processor = ImageProcessor(model, CAMERA, TrackerParams())
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(), model))
     nominal, kept = processor.search.restarts(prior)
     assert nominal is processor.restart
     np.testing.assert_array_equal(kept.pinned_angle[virtual], TRUE_CAMERA)

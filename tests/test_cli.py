@@ -9,7 +9,8 @@ import pytest
 
 from drake_tracker.cli.args import UsageError, scenario_name
 from drake_tracker.cli.main import main
-from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
+from drake_tracker.params.loading import load_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.sim.scenario.load import ALL_SEQUENCES, BIAS_VARIANTS, list_presets
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

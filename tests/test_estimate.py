@@ -51,7 +51,7 @@ def test_the_readout_loads_its_kernel_when_made_and_a_context_adds_no_signature(
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
 
-    bank = JointKalmanBankSystem(apollo, TrackerParams(), period_s=1e-3)
+    bank = JointKalmanBankSystem(model=apollo, params=TrackerParams(), period_s=1e-3)
     signatures = list(relative_poses_one.signatures)
     assert signatures  # loaded by the readout
     context = bank.CreateDefaultContext()

@@ -186,7 +186,7 @@ def test_a_finished_task_is_not_run_again(tmp_path):
 
 
 def test_a_parameter_file_reaches_every_task(tmp_path):
-    from drake_tracker.params.tracker_params import load_tracker_params, tracker_params_to_yaml
+    from drake_tracker.params.loading import load_tracker_params, tracker_params_to_yaml
 
     path = tmp_path / "single.yaml"
     path.write_text("image:\n  annealing_betas: [1.0]\n  num_particles: 200\n")

@@ -12,12 +12,14 @@ from pydrake.systems.analysis import Simulator
 
 from drake_tracker.core.cpf.image_update import RECENT_UPDATES, StageTimes
 from drake_tracker.core.filter.belief_buffer import ImageAnchor
-from drake_tracker.core.image_step import make_bank_and_prior
+from drake_tracker.core.filter.start import new_bank_and_belief
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.core.sensors.depth_units import depth_units_problem
 from drake_tracker.io.replay import replay_run
 from drake_tracker.io.synthetic import synthetic_run
-from drake_tracker.params.tracker_params import TrackerParams, validate_tracker_params
+from drake_tracker.params.resolve import resolve_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.params.validation import validate_tracker_params
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
 from drake_tracker.systems.messages import ImagePrior
 from drake_tracker.tracker import Tracker
@@ -97,9 +99,10 @@ def test_images_without_a_valid_pixel_or_stamp_are_skipped_with_a_warning(
 def test_cpf_system_skips_a_millimetre_image_with_a_warning(apollo, run, caplog):
     """Inside a Diagram a bad image is a rate-limited warning, never an exception."""
     p = small_params()
-    system = CpfImageUpdateSystem(apollo, run.camera_intrinsics, p, period_s=0.01)
+    system = CpfImageUpdateSystem(model=apollo, camera=run.camera_intrinsics, params=p,
+                                  period_s=0.01)
     context = system.CreateDefaultContext()
-    _, belief = make_bank_and_prior(apollo, p, run.readings_rad[0])
+    _, belief = new_bank_and_belief(resolve_tracker_params(p, apollo), run.readings_rad[0])
     anchor = ImageAnchor(0.0, 0.0, belief, np.zeros(apollo.num_joints))
     system.GetInputPort("image_prior").FixValue(context, ImagePrior(0, 0.0, anchor, ""))
     system.GetInputPort("depth_frame").FixValue(

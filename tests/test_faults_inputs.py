@@ -11,11 +11,8 @@ from fast_params import small_params
 from drake_tracker.core.sensors.depth_frames import DepthFrame, depth_to_metres
 from drake_tracker.io.recording import RecordedRun
 from drake_tracker.io.synthetic import synthetic_run
-from drake_tracker.params.tracker_params import (
-    TrackerParams,
-    load_tracker_params,
-    tracker_params_to_yaml,
-)
+from drake_tracker.params.loading import load_tracker_params, tracker_params_to_yaml
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.sim.scenario.load import load_scenario
 from drake_tracker.tracker import Tracker
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from drake_tracker.core.likelihood.pixel_model import LikelihoodParams
-from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.robustness.jump_visibility import changed_visible_pixels, jump_testable
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.robot.model import build_tracker_model, robot_preset

@@ -8,8 +8,11 @@ import pytest
 from numba import njit, types
 from numba.extending import intrinsic
 
-from drake_tracker.core.render.backends import default_view_configuration, random_configurations
 from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.render.configurations import (
+    default_view_configuration,
+    random_configurations,
+)
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.simd import ir_f32 as simd_f32
 from drake_tracker.core.simd.lane_render import lane_scratch, render_lanes
@@ -166,7 +169,7 @@ def test_the_kept_workspace_is_left_clear_between_calls():
     all zeros and empty after every call (the kernel clears what it drew, the torso's
     clipped triangles included), so each call scores as a fresh workspace would."""
     from drake_tracker.core.likelihood.pixel_model import LikelihoodParams, prepare_observation
-    from drake_tracker.core.render.backends import synthetic_observation
+    from drake_tracker.core.render.configurations import synthetic_observation
 
     model = build_tracker_model(robot_preset("apollo"))
     renderer = BatchedDepthRenderer(model, CameraIntrinsics.from_fov(80, 60, np.radians(45)))

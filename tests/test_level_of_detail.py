@@ -4,12 +4,12 @@ full meshes, and the simplification's geometric tolerance."""
 import numpy as np
 import pytest
 
-from drake_tracker.core.render.backends import (
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.render.configurations import (
     default_view_configuration,
-    make_renderer,
     random_configurations,
 )
-from drake_tracker.core.render.batched import BatchedDepthRenderer
 from drake_tracker.core.render.level_of_detail import LevelOfDetail, cluster_mesh, edges_balanced
 from drake_tracker.core.render.meshes import sphere_mesh
 from drake_tracker.core.sensors.camera import CameraIntrinsics
@@ -53,7 +53,7 @@ def test_the_likelihood_path_scores_the_images_that_match_drake_vtk(model):
         log_likelihoods,
         prepare_observation,
     )
-    from drake_tracker.core.render.backends import synthetic_observation
+    from drake_tracker.core.render.configurations import synthetic_observation
     from drake_tracker.core.simd.lane_likelihood import SCORE_ATOL_PER_PIXEL
 
     renderer = BatchedDepthRenderer(model, FULL.subsampled(8))

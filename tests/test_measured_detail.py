@@ -8,8 +8,9 @@ import itertools
 import numpy as np
 import pytest
 
-from drake_tracker.core.render.backends import make_renderer, random_configurations
+from drake_tracker.core.render.backends import make_renderer
 from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.render.configurations import random_configurations
 from drake_tracker.core.render.level_of_detail import LevelOfDetail
 from drake_tracker.core.render.measured_detail import choose_options, wrong_pixels
 from drake_tracker.core.render.meshes import cylinder_mesh, sphere_mesh

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 from fast_params import small_params
-from test_timestamps import assert_same_when_settled, feed, simulate
+from offline_vs_diagram import feed
 
 from drake_tracker.core.filter.estimate import PoseReadout
 from drake_tracker.core.robustness.health import HealthState
@@ -59,11 +59,3 @@ def test_images_without_the_arm_are_skipped_and_the_estimate_holds(apollo, caplo
     assert tracker.health.state == HealthState.TRACKING  # back once the arm is
 
 
-def test_skipping_them_gives_the_same_estimates_offline_and_in_the_diagram(apollo):
-    run, _ = _run_with_images_without_the_arm(apollo)
-    p = small_params()
-    offline_tracker = Tracker(apollo, run.camera_intrinsics, p)
-    offline, applied = feed(offline_tracker, run)
-    diagram, images_applied = simulate(apollo, run, p)
-    assert images_applied == sum(applied.values())
-    assert_same_when_settled(run, diagram, offline)

@@ -70,12 +70,12 @@ def test_one_thread_is_always_serial():
 
 def test_serial_and_parallel_kernels_give_identical_scores():
     from drake_tracker.core.likelihood.pixel_model import LikelihoodParams, prepare_observation
-    from drake_tracker.core.render.backends import (
+    from drake_tracker.core.render.batched import BatchedDepthRenderer
+    from drake_tracker.core.render.configurations import (
         default_view_configuration,
         random_configurations,
         synthetic_observation,
     )
-    from drake_tracker.core.render.batched import BatchedDepthRenderer
     from drake_tracker.core.render.fused_score import fused_scores
     from drake_tracker.core.sensors.camera import CameraIntrinsics
     from drake_tracker.robot.model import build_tracker_model, robot_preset

@@ -6,11 +6,14 @@ import pytest
 
 from drake_tracker.core.filter.estimate import PoseReadout
 from drake_tracker.core.filter.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.filter.start import full_reading, new_bank_and_belief
+from drake_tracker.core.image_processor import ImageProcessor
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.metrics import pose_errors
+from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.robot.model import build_tracker_model, robot_preset
 
@@ -40,11 +43,11 @@ def scene():
 def _update(model, truth, image, seed):
     params = TrackerParams()
     params.image.seed = seed
-    processor = ImageProcessor(model, CAMERA, params)
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     robot = [model.joint_names.index(n) for n in model.robot_joint_names]
     reading = truth[robot].copy()
     arm = [model.joint_names.index(n) for n in model.robot_joint_names if n.startswith("arm")]
-    _, prior = make_bank_and_prior(model, params, reading)
+    _, prior = new_bank_and_belief(resolve_tracker_params(params, model), reading)
     prior[MEAN_A] = full_reading(model, reading)
     prior[MEAN_A, arm[:2]] += np.radians(2.0)  # the prior is 2 deg off on two joints
     outcome = processor.observe(DepthFrame(0.0, 0.05, image, 0), prior, elapsed_s=0.1)
@@ -182,7 +185,7 @@ def test_a_hidden_arm_keeps_the_bias_it_had_learnt(apollo):
     arm = [model.joint_names.index(n) for n in model.robot_joint_names if n.startswith("arm")]
     bias = np.zeros(model.num_joints)
     bias[arm] = np.radians(8.6)  # the protocol's constant bias
-    bank, belief = make_bank_and_prior(model, params, (truth + bias)[robot])
+    bank, belief = new_bank_and_belief(resolve_tracker_params(params, model), (truth + bias)[robot])
     belief[MEAN_A], belief[MEAN_B] = truth, bias  # learnt from the images before the box
     belief[VAR_A], belief[COV_AB], belief[VAR_B] = 1e-6, -0.99e-6, 1e-6
     rng = np.random.default_rng(0)
@@ -225,10 +228,10 @@ def test_an_image_that_hides_the_whole_arm_leaves_the_prior_where_it_was(scene):
         params = TrackerParams()
         params.image.seed = seed
         params.kalman.robot_joints.bias_jump_rate_per_s = 5.0
-        _, prior = make_bank_and_prior(model, params, truth[robot_joints])
+        _, prior = new_bank_and_belief(resolve_tracker_params(params, model), truth[robot_joints])
         prior[MEAN_A] = full_reading(model, truth[robot_joints])
         prior[VAR_A] = np.where(prior[VAR_A] > 0, prior_std**2, 0.0)
-        outcome = ImageProcessor(model, CAMERA, params).observe(
+        outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)).observe(
             DepthFrame(0.0, 0.05, hidden.astype(np.float32), 0), prior, elapsed_s=0.1)
         assert outcome.consistency.visible_robot_pixels == 0
         post = outcome.observation.apply(prior)

@@ -7,13 +7,9 @@ import numpy as np
 import pytest
 
 from drake_tracker.evaluation.methods import method_params
-from drake_tracker.params.tracker_params import (
-    JointNoise,
-    TrackerParams,
-    joint_noise_for,
-    load_tracker_params,
-    resolve_kalman_params,
-)
+from drake_tracker.params.loading import load_tracker_params
+from drake_tracker.params.resolve import joint_noise_for, resolve_kalman_params
+from drake_tracker.params.tracker_params import JointNoise, TrackerParams
 from drake_tracker.robot.model import (
     VIRTUAL_JOINT_NAMES,
     FrameOffset,
@@ -85,9 +81,11 @@ def test_a_bad_prismatic_default_is_named_at_load(tmp_path):
 
 def test_the_tracker_starts_with_the_metre_prior_on_the_finger(slider):
     from drake_tracker.core.filter.kalman import VAR_B
-    from drake_tracker.core.image_step import make_bank_and_prior
+    from drake_tracker.core.filter.start import new_bank_and_belief
+    from drake_tracker.params.resolve import resolve_tracker_params
 
-    _, prior = make_bank_and_prior(slider, TrackerParams(), np.array([0.3, 0.02]))
+    _, prior = new_bank_and_belief(resolve_tracker_params(TrackerParams(), slider), np.array([0.3,
+    0.02]))
     k = slider.joint_names.index("slide")
     assert prior[VAR_B, k] == pytest.approx(0.01 ** 2)
     assert prior[VAR_B, slider.joint_names.index("turn")] == pytest.approx(0.1 ** 2)

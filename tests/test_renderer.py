@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from drake_tracker.core.render.backends import (
-    benchmark_renderers,
+from drake_tracker.bench.renderers import benchmark_renderers
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.render.configurations import (
     default_view_configuration,
-    make_renderer,
     random_configurations,
 )
-from drake_tracker.core.render.batched import BatchedDepthRenderer
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.robot.model import build_tracker_model, robot_preset
 

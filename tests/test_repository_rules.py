@@ -1,6 +1,8 @@
-"""The design card's rules that a test can hold: no Python file over 400 lines, and no
-import cycle between the package's modules (imports at module level, outside
-``if TYPE_CHECKING:``; imports inside functions are deliberate late bindings)."""
+"""The design card's rules that a test can hold: no Python file over 400 lines, no
+folder of the package with more than 15 modules, no import cycle between the package's
+modules (every import that runs: at module level or inside a function; only
+``if TYPE_CHECKING:`` blocks, which never run, are left out), and the layers: the core
+never imports the package's upper layers."""
 
 import ast
 from pathlib import Path
@@ -31,15 +33,22 @@ def _is_type_checking_block(node: ast.stmt) -> bool:
     return isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
 
 
+def _runtime_nodes(tree: ast.AST):
+    """Every node of ``tree`` outside ``if TYPE_CHECKING:`` blocks."""
+    for node in ast.iter_child_nodes(tree):
+        if _is_type_checking_block(node):
+            continue
+        yield node
+        yield from _runtime_nodes(node)
+
+
 def _module_level_imports(path: Path, modules: set[str]) -> set[str]:
-    """The package modules ``path`` imports at module level (``from a import b`` counts
-    as a.b where that is a module, else as a)."""
+    """The package modules ``path`` imports when it runs, at module level or inside a
+    function (``from a import b`` counts as a.b where that is a module, else as a)."""
     name = _module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found = set()
-    for node in ast.parse(path.read_text()).body:
-        if _is_type_checking_block(node):
-            continue
+    for node in _runtime_nodes(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -91,3 +100,60 @@ def test_no_import_cycle_between_the_package_modules():
     assert sum(len(v) for v in graph.values()) > 100  # the imports were read
     cycles = _cycles(graph)
     assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles[:5])
+
+
+def test_the_import_reader_sees_imports_inside_functions(tmp_path):
+    package = tmp_path / "pkg"
+    package.mkdir()
+    path = package / "a.py"
+    path.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import pkg.c\n"
+                    "def f():\n    from pkg.b import thing\n    return thing\n")
+    global ROOT
+    saved, ROOT = ROOT, tmp_path
+    try:
+        assert _module_level_imports(path, {"pkg.a", "pkg.b", "pkg.c"}) == {"pkg.b"}
+    finally:
+        ROOT = saved
+
+
+#: The layers, lowest first: a module imports only from its own layer and those below.
+#: ``robot`` is the model (a MultibodyPlant), the core's input; ``params`` resolves the
+#: user's parameters into the core's ``ResolvedParams``.
+LAYERS = (
+    ("robot",),
+    ("core",),
+    ("params",),
+    ("tracker", "systems", "io", "metrics", "progress", "kernel_warm_up", "models"),
+    ("sim",),
+    ("evaluation", "demo", "bench", "servo", "cli"),
+)
+
+
+def _layer(module: str) -> int:
+    parts = module.split(".")
+    if len(parts) == 1:  # the package's own __init__: the public API, above its layers
+        return len(LAYERS) - 1
+    for k, names in enumerate(LAYERS):
+        if parts[1] in names:
+            return k
+    raise AssertionError(f"{module}: no layer for '{parts[1]}' (add it to LAYERS)")
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    paths = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+    modules = set(paths)
+    upward = []
+    for m, p in paths.items():
+        for t in _module_level_imports(p, modules):
+            if t != "drake_tracker" and _layer(t) > _layer(m):
+                upward.append(f"{m} -> {t}")
+    assert not upward, "imports of an upper layer: " + "; ".join(sorted(upward))
+
+
+def test_no_folder_of_the_package_has_more_than_15_modules():
+    crowded = {}
+    for folder in [PACKAGE, *[p for p in PACKAGE.rglob("*") if p.is_dir()]]:
+        count = len([p for p in folder.glob("*.py") if p.name != "__init__.py"])
+        if count > 15:
+            crowded[str(folder.relative_to(ROOT))] = count
+    assert not crowded, f"folders over 15 modules: {crowded}"

@@ -6,19 +6,18 @@ nothing and contradicts nothing, so no image update can move it; the restart is 
 brings it back.
 """
 
-import logging
 from dataclasses import replace
 
 import numpy as np
 import pytest
-from fast_params import small_params
-from test_timestamps import assert_same_when_settled, feed, simulate
 
 from drake_tracker.core.filter.angle_observation import AngleObservation, Restart
 from drake_tracker.core.filter.estimate import PoseReadout
 from drake_tracker.core.filter.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
-from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
-from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.filter.start import full_reading, new_bank_and_belief
+from drake_tracker.core.image_processor import ImageProcessor
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.robustness.health import (
     HealthParams,
     ImageConsistency,
@@ -29,11 +28,10 @@ from drake_tracker.core.robustness.health import (
 )
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame
-from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.metrics import pose_errors
+from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.robot.model import build_tracker_model, robot_preset
-from drake_tracker.tracker import Tracker
 
 CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 SHOULDER_BIAS_RAD = np.radians(100.0)
@@ -110,7 +108,7 @@ def out_of_view_prior(model, truth, encoder_bias_rad: np.ndarray) -> np.ndarray:
     while the encoders read ``truth + encoder_bias_rad`` (robot joints)."""
     robot = [model.joint_names.index(n) for n in model.robot_joint_names]
     reading = truth[robot] + encoder_bias_rad
-    _, prior = make_bank_and_prior(model, TrackerParams(), reading)
+    _, prior = new_bank_and_belief(resolve_tracker_params(TrackerParams(), model), reading)
     prior[MEAN_A] = full_reading(model, reading)
     shoulder = model.joint_names.index("arm_joint_1")
     prior[MEAN_A, shoulder] += SHOULDER_BIAS_RAD
@@ -128,7 +126,7 @@ def test_an_image_that_agrees_with_the_encoders_and_not_the_estimate_restarts_it
     model, truth, frame = scene
     prior = out_of_view_prior(model, truth, np.zeros(len(model.robot_joint_names)))
     assert hand_error_mm(model, truth, prior[MEAN_A]) > 300.0
-    processor = ImageProcessor(model, CAMERA, TrackerParams())
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(), model))
     outcome = processor.observe(frame, prior, 0.1, TrackerHealth(acquired=True))
     assert outcome.restarted and outcome.observation.restart is processor.restart
     post = outcome.observation.apply(prior)
@@ -151,7 +149,7 @@ def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough
     prior = out_of_view_prior(model, truth, bias)
     params = TrackerParams()
     params.health.challenger_bias_sigmas = 0.0
-    processor = ImageProcessor(model, CAMERA, params)
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     encoders = processor.restart.apply(prior)[MEAN_A]
     before = hand_error_mm(model, truth, encoders)
     assert before > 30.0
@@ -181,7 +179,7 @@ def test_an_image_that_scores_every_particle_the_same_leaves_the_belief(scene):
     prior[MEAN_A, model.joint_names.index("arm_joint_1")] += np.radians(80.0)
     prior[VAR_A] = np.radians(0.2) ** 2
     background = replace(frame, depth_m=np.full_like(frame.depth_m, 2.5))
-    outcome = ImageProcessor(model, CAMERA, TrackerParams()).observe(
+    outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(), model)).observe(
         background, prior, 0.1, TrackerHealth(acquired=True))
     assert outcome.consistency.robot_pixels == 0 and not outcome.restarted
     assert outcome.result.flat_likelihood
@@ -190,27 +188,3 @@ def test_an_image_that_scores_every_particle_the_same_leaves_the_belief(scene):
     np.testing.assert_allclose(outcome.observation.apply(prior), prior, rtol=1e-12, atol=0)
 
 
-def assert_restarts_alike_offline_and_in_the_diagram(apollo, params, bias_deg: float,
-                                                    caplog, message: str = "") -> None:
-    """Feeds a 0.5 s synthetic run (a constant ``bias_deg`` on the encoders) to the
-    offline tracker, which must restart at least once (logging ``message``, if given),
-    and simulates it in the Diagram: the same images applied, the same estimates."""
-    run = synthetic_run(apollo, duration_s=0.5, encoder_rate_hz=200.0, seed=7,
-                        bias_rad=np.radians(bias_deg))
-    offline_tracker = Tracker(apollo, run.camera_intrinsics, params)
-    with caplog.at_level(logging.WARNING):
-        offline, applied = feed(offline_tracker, run)
-    assert message in caplog.text
-    assert offline_tracker.health.restarts >= 1
-    diagram, images_applied = simulate(apollo, run, params)
-    assert images_applied == sum(applied.values())
-    assert_same_when_settled(run, diagram, offline)
-
-
-def test_a_restart_gives_the_same_estimates_offline_and_in_the_diagram(apollo, caplog):
-    """The restart travels in the image's observation through the Diagram's delay buffer
-    as through the offline tracker's. Forced here: every image whose estimate renders
-    under 99 % of the encoders' arm restarts (the run's arm has a constant bias)."""
-    p = small_params()
-    p.health.misplaced_fraction, p.health.restart_after_misplaced_s = 0.99, 0.0
-    assert_restarts_alike_offline_and_in_the_diagram(apollo, p, 4.0, caplog)

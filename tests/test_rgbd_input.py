@@ -44,7 +44,7 @@ def test_camera_model_from_drake_types_equals_the_intrinsics():
 
 
 def test_a_new_capture_time_makes_a_new_frame_even_an_older_one():
-    adapter = DepthImageToFrame("16U_mm", period_s=0.01)
+    adapter = DepthImageToFrame(encoding="16U_mm", period_s=0.01)
     simulator = Simulator(adapter)
     context = simulator.get_mutable_context()
     image = ImageDepth16U(4, 3)
@@ -77,11 +77,12 @@ def test_an_image_port_needs_its_capture_time():
     builder = DiagramBuilder()
     readings = builder.AddSystem(ConstantVectorSource(np.zeros(len(model.robot_joint_names))))
     stamp = builder.AddSystem(ConstantVectorSource([0.0]))
-    image = builder.AddSystem(ImageStamper(0.1, ImageDepth32F(8, 6)))
+    image = builder.AddSystem(ImageStamper(period_s=0.1, model_image=ImageDepth32F(8, 6)))
     with pytest.raises(ValueError, match="image_time"):
-        AddTracker(builder, model, CameraInfo(8, 6, 0.8), TrackerParams(),
-                   readings.get_output_port(), stamp.get_output_port(),
-                   image.GetOutputPort("image"), encoder_period_s=0.001)
+        AddTracker(builder, model=model, camera=CameraInfo(8, 6, 0.8), params=TrackerParams(),
+                   measured_position=readings.get_output_port(),
+                   measurement_time=stamp.get_output_port(), depth=image.GetOutputPort("image"),
+                   encoder_period_s=0.001)
 
 
 @pytest.mark.parametrize("depth", ["32F", "16U"])

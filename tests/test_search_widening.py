@@ -9,17 +9,20 @@ import pytest
 
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.filter.kalman import MEAN_A
-from drake_tracker.core.image_step import ImageProcessor, make_bank_and_prior
+from drake_tracker.core.filter.start import new_bank_and_belief
+from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.likelihood.occlusion import with_pixel_occlusion
 from drake_tracker.core.likelihood.pixel_model import (
     LikelihoodParams,
     prepare_observation,
     widened_observation,
 )
-from drake_tracker.core.render.backends import default_view_configuration
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.robustness.health import TrackerHealth
 from drake_tracker.core.sensors.camera import CameraIntrinsics
-from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
+from drake_tracker.params.loading import load_tracker_params
+from drake_tracker.params.resolve import resolve_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
 
 PER_PIXEL = ("sigma", "gauss_coeff", "occ_coeff", "log_p_occ_inf", "inv_sigma",
              "lam_sigma2")
@@ -103,7 +106,7 @@ def test_only_an_arm_never_held_is_searched_for_widened(health, widened):
     model, truth, frame = apollo_in_view(noise_seed=5)
     params = TrackerParams()
     params.image.search_depth_widening_m = 0.05
-    processor = ImageProcessor(model, CAMERA, params)
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     calls = []
 
     class Spy:  # the update, recording whether each call is widened
@@ -116,7 +119,8 @@ def test_only_an_arm_never_held_is_searched_for_widened(health, widened):
 
     update = processor.update
     processor.update = Spy()
-    _, prior = make_bank_and_prior(model, params, truth[:len(model.robot_joint_names)])
+    _, prior = new_bank_and_belief(resolve_tracker_params(params, model),
+    truth[:len(model.robot_joint_names)])
     prior[MEAN_A] = truth
     outcome = processor.observe(frame, prior, 0.1, health)
     assert outcome.observation is not None and calls[0] == widened

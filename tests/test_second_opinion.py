@@ -12,16 +12,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from fast_params import small_params
 from test_restart import (
     CAMERA,
     apollo_in_view,
-    assert_restarts_alike_offline_and_in_the_diagram,
     hand_error_mm,
 )
 
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A
-from drake_tracker.core.image_step import ImageProcessor, full_reading, make_bank_and_prior
+from drake_tracker.core.filter.start import full_reading, new_bank_and_belief
+from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.robustness.health import (
     HealthParams,
     ImageConsistency,
@@ -29,6 +28,7 @@ from drake_tracker.core.robustness.health import (
     is_reacquiring,
     is_surprising,
 )
+from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 
 FOLD_DEG = {"arm_joint_2": 8.0, "arm_joint_4": -12.0}
@@ -67,7 +67,7 @@ def scene():
 
 def prior_at(model, reading, q_mean) -> np.ndarray:
     """A confident belief (0.5 deg) with angles at ``q_mean``, the rest as the bank's."""
-    _, prior = make_bank_and_prior(model, TrackerParams(), reading)
+    _, prior = new_bank_and_belief(resolve_tracker_params(TrackerParams(), model), reading)
     prior[MEAN_A] = q_mean
     prior[MEAN_B] = full_reading(model, reading) - q_mean  # the reading is a + b
     prior[VAR_A] = np.radians(0.5) ** 2
@@ -90,12 +90,14 @@ def test_a_wrong_fold_is_replaced_by_the_search_from_the_encoders(scene, caplog)
     acquired = TrackerHealth(acquired=True)
     off = TrackerParams()
     off.health.second_opinion_agreement = 0.0
-    alone = ImageProcessor(model, CAMERA, off).observe(frame, prior, 0.1, acquired)
+    alone = ImageProcessor(model, CAMERA, resolve_tracker_params(off, model)).observe(frame, prior,
+    0.1, acquired)
     assert is_surprising(alone.consistency, TrackerParams().health)
     assert not alone.restarted
     stuck = hand_error_mm(model, truth, alone.observation.apply(prior)[MEAN_A])
     with caplog.at_level(logging.WARNING):
-        outcome = ImageProcessor(model, CAMERA, TrackerParams()).observe(
+        outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(),
+        model)).observe(
             frame, prior, 0.1, acquired)
     assert outcome.restarted and "search from the encoders' arm explains it better" \
         in caplog.text
@@ -111,11 +113,13 @@ def test_an_unsurprising_image_gets_no_second_opinion(scene):
     model, truth, reading, frame = scene
     prior = prior_at(model, reading, truth)
     acquired = TrackerHealth(acquired=True)
-    outcome = ImageProcessor(model, CAMERA, TrackerParams()).observe(frame, prior, 0.1,
+    outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(),
+    model)).observe(frame, prior, 0.1,
                                                                      acquired)
     off = TrackerParams()
     off.health.second_opinion_agreement = 0.0
-    alone = ImageProcessor(model, CAMERA, off).observe(frame, prior, 0.1, acquired)
+    alone = ImageProcessor(model, CAMERA, resolve_tracker_params(off, model)).observe(frame, prior,
+    0.1, acquired)
     assert not outcome.restarted and not is_surprising(outcome.consistency,
                                                        TrackerParams().health)
     np.testing.assert_array_equal(outcome.result.mean, alone.result.mean)
@@ -156,7 +160,8 @@ def test_the_images_that_see_the_arm_again_get_the_second_opinion(scene, confirm
     params.health.second_opinion_agreement = 0.0
     params.health.second_opinion_on_reacquisition = enabled
     health = TrackerHealth(acquired=False, confirmed_s=confirmed_s, left_view=True)
-    outcome = ImageProcessor(model, CAMERA, params).observe(frame, prior, 0.1, health)
+    outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)).observe(frame,
+    prior, 0.1, health)
     assert outcome.restarted == searched
     after = hand_error_mm(model, truth, outcome.observation.apply(prior)[MEAN_A])
     encoders = hand_error_mm(model, truth, full_reading(model, reading))
@@ -166,13 +171,3 @@ def test_the_images_that_see_the_arm_again_get_the_second_opinion(scene, confirm
         assert after > encoders
 
 
-def test_a_second_opinion_gives_the_same_estimates_offline_and_in_the_diagram(apollo, caplog):
-    """The second search draws from the image's stream after the first, and its restart
-    travels in the observation: the Diagram follows the offline tracker. Forced here:
-    every image with a disagreeing pixel is surprising, any gain is adopted, and the
-    update has 5 particles against the search's 150, the encoders 0.5 deg off."""
-    p = small_params()
-    p.health.second_opinion_agreement, p.health.second_opinion_margin_nats = 1.0, 0.0
-    p.image.num_particles = 5
-    assert_restarts_alike_offline_and_in_the_diagram(
-        apollo, p, 0.5, caplog, "search from the encoders' arm explains it better")

@@ -19,10 +19,11 @@ def simulated():
     scenario = load_scenario("s-full-arm/constant")
 
     def add_tracker(builder, world):
-        tracker = AddTracker(builder, world.model, world.intrinsics, params,
-                             world.port("measured_position"),
-                             world.port("measurement_time"), world.port("depth_frame"),
-                             world.encoder_period_s)
+        tracker = AddTracker(builder, model=world.model, camera=world.intrinsics, params=params,
+                             measured_position=world.port("measured_position"),
+                             measurement_time=world.port("measurement_time"),
+                             depth=world.port("depth_frame"),
+                             encoder_period_s=world.encoder_period_s)
         return {"X_CE": tracker.port("X_CE"),
                 "estimated_position": tracker.port("estimated_position")}
 

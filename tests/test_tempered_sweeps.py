@@ -18,9 +18,10 @@ from drake_tracker.core.likelihood.pixel_model import (
     coarser_observation,
     prepare_observation,
 )
-from drake_tracker.core.render.backends import default_view_configuration
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.sensors.camera import CameraIntrinsics, subsample
-from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
+from drake_tracker.params.loading import load_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
 
 BETAS = (0.003, 0.03, 0.3, 1.0)
 PER_PIXEL = ("z", "sigma", "gauss_coeff", "occ_coeff", "log_p_occ_inf", "inv_sigma",

@@ -10,12 +10,10 @@ import pytest
 from awkward_stamps import awkward_stamps
 
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.sensors.stamp_params import TimestampParams
 from drake_tracker.core.sensors.timestamps import StreamClock
-from drake_tracker.params.tracker_params import (
-    TimestampParams,
-    TrackerParams,
-    validate_tracker_params,
-)
+from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.params.validation import validate_tracker_params
 
 
 def test_a_glitch_is_rejected_and_does_not_poison_later_stamps():

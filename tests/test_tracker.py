@@ -8,18 +8,19 @@ import pytest
 
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.filter.kalman import initial_moments
-from drake_tracker.core.image_step import camera_chain_joints
-from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.io.replay import encoders_only_X_CE, replay_run, run_report
 from drake_tracker.io.synthetic import synthetic_run
-from drake_tracker.params.tracker_params import (
-    JointNoise,
-    TrackerParams,
-    load_tracker_params,
+from drake_tracker.params.loading import load_tracker_params
+from drake_tracker.params.resolve import (
+    camera_chain_joints,
     resolve_kalman_params,
+    resolve_tracker_params,
 )
+from drake_tracker.params.tracker_params import JointNoise, TrackerParams
 from drake_tracker.robot.model import build_tracker_model, robot_preset
 from drake_tracker.tracker import Tracker
 
@@ -99,19 +100,24 @@ def test_all_nan_image_changes_nothing(apollo):
 
 
 def test_bad_parameters_name_the_problem(apollo, tmp_path):
-    names = apollo.joint_names
+    """Checked once, when resolved for the model (the Tracker and AddTracker do that),
+    or when a file is loaded; each error names its field."""
     params = TrackerParams()
     params.kalman.overrides["no_such_joint"] = JointNoise()
     with pytest.raises(ValueError, match="no_such_joint"):
-        resolve_kalman_params(params, names)
+        resolve_tracker_params(params, apollo)
     params = TrackerParams()
     params.kalman.robot_joints.encoder_noise_std_rad = 0.0
     with pytest.raises(ValueError, match="encoder_noise_std_rad"):
-        resolve_kalman_params(params, names)
+        Tracker(apollo, CAMERA, params)
     params = TrackerParams()
     params.kalman.robot_joints.bias_decay_per_s = 1.5
     with pytest.raises(ValueError, match=r"c must be in \(0, 1\]"):
-        resolve_kalman_params(params, names)
+        resolve_tracker_params(params, apollo)
+    params = TrackerParams()
+    params.initial_positions_rad["no_such_joint"] = 0.0
+    with pytest.raises(ValueError, match="initial_positions_rad"):
+        resolve_tracker_params(params, apollo)
     path = tmp_path / "bad.yaml"
     path.write_text("image:\n  num_particles: 0\n")
     with pytest.raises(ValueError, match="image.num_particles"):

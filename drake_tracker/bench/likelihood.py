@@ -28,21 +28,21 @@ import numba
 import numpy as np
 from numba import njit
 
+from drake_tracker.bench.renderers import best_wall_and_cpu_time
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.filter.kalman import initial_moments
-from drake_tracker.core.image_step import camera_chain_joints
 from drake_tracker.core.likelihood.pixel_model import PreparedObservation
-from drake_tracker.core.render.backends import (
-    best_wall_and_cpu_time,
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import (
     default_view_configuration,
-    make_renderer,
     random_configurations,
 )
 from drake_tracker.core.render.fused_score import _score_serial
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.simd.lane_kinematics import lane_relative_poses
 from drake_tracker.core.simd.lanes import LANES
-from drake_tracker.params.tracker_params import TrackerParams, resolve_blocks
+from drake_tracker.params.resolve import camera_chain_joints, resolve_blocks
+from drake_tracker.params.tracker_params import TrackerParams
 
 if TYPE_CHECKING:
     from drake_tracker.robot.model import TrackerModel

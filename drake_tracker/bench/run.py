@@ -60,9 +60,9 @@ from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.filter.angle_observation import AngleObservation
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
 from drake_tracker.core.filter.kalman import VAR_A, JointKalmanBank, initial_moments
-from drake_tracker.core.image_step import camera_chain_joints
 from drake_tracker.core.sensors.camera import CameraIntrinsics
-from drake_tracker.params.tracker_params import TrackerParams, resolve_blocks, resolve_kalman_params
+from drake_tracker.params.resolve import camera_chain_joints, resolve_blocks, resolve_kalman_params
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.robot.model import TrackerModel, build_tracker_model, robot_preset
 
 if TYPE_CHECKING:
@@ -196,10 +196,10 @@ def bench_tracker_alone(params: TrackerParams, duration_s: float,
     model = build_tracker_model(scenario.resolved_robot_config())
     builder = DiagramBuilder()
     source = builder.AddSystem(RecordedRunSource(run))
-    tracker = AddTracker(builder, model, run.camera_intrinsics, params,
-                         source.GetOutputPort("measured_position"),
-                         source.GetOutputPort("measurement_time"),
-                         source.GetOutputPort("depth_frame"),
+    tracker = AddTracker(builder, model=model, camera=run.camera_intrinsics, params=params,
+                         measured_position=source.GetOutputPort("measured_position"),
+                         measurement_time=source.GetOutputPort("measurement_time"),
+                         depth=source.GetOutputPort("depth_frame"),
                          encoder_period_s=1.0 / scenario.encoders.rate_hz)
     marks = []  # filled by add_second_marks
     add_second_marks(builder, marks)

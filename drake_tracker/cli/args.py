@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import difflib
 import math
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -97,7 +96,7 @@ def load_params_arg(path: str | None) -> TrackerParams:
     """The :class:`~drake_tracker.params.tracker_params.TrackerParams` of ``--params path``
     (defaults
     when None); a missing or invalid file is a UsageError."""
-    from drake_tracker.params.tracker_params import load_tracker_params
+    from drake_tracker.params.loading import load_tracker_params
 
     if path is not None and not Path(path).is_file():
         raise UsageError(f"parameter file '{path}' does not exist ('drake-tracker params "
@@ -110,7 +109,7 @@ def load_params_arg(path: str | None) -> TrackerParams:
 
 def check_params_for_model(params: TrackerParams, model: TrackerModel, where: str) -> None:
     """Names in ``params`` (overrides, blocks) must be joints of ``model``."""
-    from drake_tracker.params.tracker_params import resolve_blocks, resolve_kalman_params
+    from drake_tracker.params.resolve import resolve_blocks, resolve_kalman_params
 
     try:
         resolve_kalman_params(params, list(model.joint_names),
@@ -179,8 +178,3 @@ def check_out_dir(path: str) -> Path:
 def _one_line(err: BaseException) -> str:
     text = " ".join(str(err).split())
     return text if len(text) <= 300 else text[:297] + "..."
-
-
-def note(message: str) -> None:
-    """A one-line note for the user on stderr (stdout keeps the results)."""
-    print(f"note: {message}", file=sys.stderr)

@@ -215,7 +215,7 @@ def _add_params(sub) -> None:
                        help="a parameter file to check and print with the defaults filled in")
 
     def run(args):
-        from drake_tracker.params.tracker_params import tracker_params_to_yaml
+        from drake_tracker.params.loading import tracker_params_to_yaml
 
         print(tracker_params_to_yaml(load_params_arg(None if args.defaults else args.file)),
               end="")

@@ -1,16 +1,24 @@
-"""The core pipeline that the offline tracker and the Drake systems share.
+"""The per-image step, once: what happens to a depth image between the camera and the
+Kalman bank. The offline :class:`~drake_tracker.tracker.Tracker` and the Drake systems
+(``drake_tracker.systems``) both call these functions, in this order:
 
-* :class:`ImageProcessor`: a depth frame and the angles' prior at its time in, a
-  pseudo-observation of the angles (and the image's consistency) out: the CPF image
-  update with the bias-jump prior and the per-image occlusion estimate;
-* :func:`new_belief_buffer` / :func:`make_bank_and_prior`: the Kalman bank on
-  (angle, bias) and the delay buffer, started from the first reading;
-* :func:`full_reading`: the bank's reading vector (robot joints, then 0 for the virtual
-  camera joints);
-* :func:`image_time`: the time an image is applied at;
-* the output, the hand in the estimated camera frame, is ``core/filter/estimate.py``.
+1. :func:`judge_stamp`: the image's time t' (capture stamp minus the configured offset)
+   through the images' clock (``core/sensors/timestamps.py``): accepted, re-anchored,
+   or rejected with a reason;
+2. :meth:`ImagePacing.wants`: due under ``image.min_image_interval_s``, or out of
+   order (never dropped for the pacing);
+3. :func:`place_image`: where the delay buffer puts it, with the angles' prior at t'
+   (``ImageAnchor``), or why it cannot (older than the horizon, from the future, in a
+   gap of the readings);
+4. ``ImageProcessor.observe`` (``core/image_processor.py``): the image update;
+5. :func:`conclude_image`: the observation to insert into the buffer at its anchor (or
+   why the image is skipped), and the next health state;
+6. ``BeliefBuffer.add_image_observation``: the observation at t', the later readings
+   filtered again.
 
-The method's reference is ``docs/method.md``.
+The offline tracker runs 1-6 at once; in a Diagram the delay buffer system runs 1, 3
+and 6 and the image-update system 2, 4 and 5, exchanging the anchor and the
+observation through ports.
 """
 
 from __future__ import annotations
@@ -21,372 +29,112 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.core.cpf.image_update import CpfImageUpdate
-from drake_tracker.core.cpf.particle_filter import CPFResult
-from drake_tracker.core.filter.angle_observation import AngleObservation, Restart
-from drake_tracker.core.filter.belief_buffer import BeliefBuffer
-from drake_tracker.core.filter.kalman import (
-    MEAN_A,
-    VAR_A,
-    VAR_B,
-    JointKalmanBank,
-    initial_moments,
-)
-from drake_tracker.core.likelihood.occlusion import (
-    image_occlusion,
-    observed_image,
-    pixel_occlusion,
-    with_pixel_occlusion,
-)
-from drake_tracker.core.robustness.health import (
-    Challenger,
-    ImageConsistency,
-    TrackerHealth,
-    agreeing_pixels,
-    image_consistency,
-    is_consistent,
-    is_misplaced,
-    is_reacquiring,
-    is_surprising,
-    restart_due,
-    shows_no_arm,
-)
-from drake_tracker.core.robustness.jump_visibility import jump_testable
-from drake_tracker.core.robustness.second_opinion import EncoderSearch
-from drake_tracker.core.sensors.camera import CameraIntrinsics
-from drake_tracker.core.sensors.depth_frames import DepthFrame
-from drake_tracker.core.sensors.depth_units import check_depth_units
-from drake_tracker.params.tracker_params import (
-    TrackerParams,
-    joint_noise_for,
-    resolve_blocks,
-    resolve_kalman_params,
-    validate_tracker_params,
+from drake_tracker.core.filter.angle_observation import AngleObservation
+from drake_tracker.core.robustness.health import HealthParams, TrackerHealth, next_health
+from drake_tracker.core.sensors.depth_frames import DepthFrame, image_time
+from drake_tracker.core.sensors.timestamps import (
+    StampDecision,
+    StreamClock,
+    follow_buffer,
+    log_reanchor,
 )
 
 if TYPE_CHECKING:
-    from drake_tracker.robot.model import TrackerModel
+    from drake_tracker.core.filter.belief_buffer import BeliefBuffer, ImageAnchor
+    from drake_tracker.core.image_processor import ImageOutcome
+    from drake_tracker.core.resolved_params import ResolvedParams
 
-log = logging.getLogger(__name__)
+def judge_stamp(frame: DepthFrame, clock: StreamClock, buffer: BeliefBuffer,
+                readings_clock: StreamClock, params: ResolvedParams, log: logging.Logger,
+                images_keep_time: bool = False) -> StampDecision:
+    """Step 1: ``frame``'s time t' through the images' ``clock`` (changed in place: pass
+    a copy to keep the old one); a re-anchoring is logged, and an accepted image moves
+    the clock's lag behind the ``buffer``'s readings (``follow_buffer``).
 
-#: A bias jump is looked for over at most this much time since the previous image (s).
-MAX_JUMP_WINDOW_S = 1.0
+    ``images_keep_time``: without joint readings (vision only) the offline tracker's
+    buffer is advanced to the image's arrival first (in a Diagram the readings' stamps
+    advance it)."""
+    t_image = image_time(frame, params)
+    decision = clock.check(t_image)
+    if decision.reanchored_by_s is not None:
+        log_reanchor(log, "image", decision, frame.capture_time_s, clock)
+    t = decision.time_s
+    if t is None:
+        return decision
+    if images_keep_time and not params.use_joint_readings:
+        arrival = frame.arrival_time_s + t - t_image
+        buffer.advance_to(max(t, arrival) if np.isfinite(arrival) else t)
+    follow_buffer(clock, buffer, t, log, readings_clock)
+    return decision
 
 
-def image_rng(seed: int, sequence: int) -> np.random.Generator:
-    """The CPF's random stream for image ``sequence``: independent of what came before,
-    so a re-simulated or replayed run draws the same numbers."""
-    return np.random.default_rng([int(seed), int(sequence), 0x5EED])
+def place_image(buffer: BeliefBuffer, t: float) -> tuple[ImageAnchor | None, str]:
+    """Step 3: where the buffer applies an image at ``t`` (its anchor: the prior at t),
+    or (None, why not)."""
+    problem = buffer.image_time_problem(t) or buffer.reading_gap_problem(t)
+    if problem:
+        return None, problem
+    return buffer.image_anchor(t), ""
 
 
 @dataclass(frozen=True)
-class ImageOutcome:
-    """What one image update produced (all None for an image with no valid pixel):
-    ``consistency`` compares the image with the robot rendered at the prior mean."""
+class ImagePacing:
+    """Step 2: which images are processed. ``next_due_s``: images stamped before it are
+    not due; ``last_applied_s``: the latest applied image's time."""
+
+    next_due_s: float = -np.inf
+    last_applied_s: float = -np.inf
+
+    def wants(self, t: float) -> bool:
+        """Whether an image at ``t`` is due: at or after ``next_due_s`` (the others are
+        skipped, so a fast camera builds up no backlog), or older than the latest applied
+        image: an image that arrives out of order is applied at its time, as the buffer
+        allows, never dropped for the pacing."""
+        return bool(t >= self.next_due_s - 1e-9 or t < self.last_applied_s)
+
+    def taken_up(self, t: float, interval_s: float) -> ImagePacing:
+        """After an image at ``t`` is taken up. Images are paced at ``interval_s`` on
+        average (the first frame at or after each due time: a 30 Hz camera with jitter
+        gives 10 images/s at 0.1 s, not the 7.5/s that a minimum gap would), never
+        closer than half of it, so a burst of frames after a stall is not all processed;
+        an out-of-order image does not pace the rest."""
+        if t < self.last_applied_s:
+            return self
+        base = self.next_due_s if np.isfinite(self.next_due_s) else t
+        return replace(self, next_due_s=max(base + interval_s, t + 0.5 * interval_s))
+
+    def applied(self, t: float) -> ImagePacing:
+        """After an image at ``t`` was applied."""
+        return replace(self, last_applied_s=max(t, self.last_applied_s))
+
+    def jump_window_s(self, t: float, health: TrackerHealth) -> float:
+        """The time a bias jump is looked for before an image at ``t``: since the previous
+        applied image, or 0 until the tracker has acquired the arm (see
+        ``ImageProcessor.jump_probability``)."""
+        return t - self.last_applied_s if health.acquired else 0.0
+
+
+@dataclass(frozen=True)
+class ImageVerdict:
+    """Step 5: the observation to insert at the image's anchor (None: skip the image,
+    for ``problem``, counted and warned under ``kind``) and the health after it."""
 
     observation: AngleObservation | None
-    result: CPFResult | None
-    consistency: ImageConsistency | None
-    #: Whether the update restarted the belief from the encoders first (see ``observe``).
-    restarted: bool = False
-    #: Whether the estimate put the arm out of view and the encoders in it (``is_misplaced``).
-    misplaced: bool = False
-    #: Why the image was not applied (observation None), if not for lack of valid pixels.
-    skip_reason: str = ""
-    #: The challenger belief after this image (``core/robustness/second_opinion.py``).
-    challenger: Challenger | None = None
+    health: TrackerHealth
+    problem: str = ""
+    kind: str = ""
 
 
-class ImageProcessor:
-    """Turns a depth frame and the prior at its time into a pseudo-observation.
-
-    Shared by the offline tracker and the Drake CPF system, so that both draw the same
-    random numbers and skip the same images.
-    """
-
-    def __init__(self, model: TrackerModel, camera: CameraIntrinsics,
-                 params: TrackerParams) -> None:
-        self.params = params
-        im = params.image
-        chain = camera_chain_joints(model)
-        blocks = resolve_blocks(params, model.joint_names, chain)
-        noise = joint_noise_for(params, model.joint_names, model.prismatic_joint_names)
-        biased = np.array([j.has_bias for j in noise])
-        if not im.bias_jumps_in_camera_chain:
-            biased &= np.array([name not in chain for name in model.joint_names])
-        self._jump_rate = np.where(biased, [j.bias_jump_rate_per_s for j in noise], 0.0)
-        self._jump_std = np.array([j.bias_jump_std_rad for j in noise])
-        start = initial_moments(np.zeros(len(noise)), [j.initial_angle_std_rad for j in noise],
-                                [j.initial_bias_std_rad for j in noise],
-                                [j.has_bias for j in noise])
-        self.restart = Restart(start[VAR_A], start[VAR_B])  # the variances of the start
-        self.update = CpfImageUpdate(
-            model, camera, blocks, im.num_particles,
-            im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
-            tuple(im.annealing_betas), tuple(im.sweep_image_widths_px),
-            im.search_depth_widening_m)
-        self.search = EncoderSearch(self.update, params, self._occlusion_aware, noise,
-                                    np.isin(model.joint_names, model.robot_joint_names),
-                                    self.restart)
-
-    def image_time(self, frame: DepthFrame) -> float:
-        """The time t' (s) ``frame`` is applied at: :func:`image_time` with these parameters."""
-        return image_time(frame, self.params)
-
-    def wants(self, frame: DepthFrame, next_due_s: float,
-              last_applied_s: float = -np.inf) -> bool:
-        """Whether ``frame`` is due (see ``wants_at``)."""
-        if frame.is_empty or not self.params.image.enabled:
-            return False
-        return self.wants_at(self.image_time(frame), next_due_s, last_applied_s)
-
-    @staticmethod
-    def wants_at(image_time_s: float, next_due_s: float,
-                 last_applied_s: float = -np.inf) -> bool:
-        """Whether an image at ``image_time_s`` is due: at or after ``next_due_s`` (see
-        ``next_due``; the others are skipped, so a fast camera builds up no backlog), or
-        older than the latest applied image (``last_applied_s``): an image that arrives
-        out of order is applied at its time, as the buffer allows, never dropped for the
-        pacing (whether it is inside the buffer's horizon is the buffer's check)."""
-        return bool(image_time_s >= next_due_s - 1e-9 or image_time_s < last_applied_s)
-
-    def next_due(self, image_time_s: float, previous_due_s: float) -> float:
-        """The earliest image time processed after an image at ``image_time_s``.
-
-        Images are paced at ``min_image_interval_s`` on average (the first frame at or
-        after each due time: a 30 Hz camera with jitter gives 10 images/s at 0.1 s, not
-        the 7.5/s that a minimum gap would), and never closer than half of it, so a burst
-        of frames after a stall is not all processed.
-        """
-        interval = self.params.image.min_image_interval_s
-        base = previous_due_s if np.isfinite(previous_due_s) else image_time_s
-        return max(base + interval, image_time_s + 0.5 * interval)
-
-    def jump_probability(self, elapsed_s: float) -> np.ndarray:
-        """(n,) probability that each joint's bias jumped within ``elapsed_s`` (the time
-        since the previous applied image; at most ``MAX_JUMP_WINDOW_S``). Callers pass 0
-        until the tracker has acquired the arm (``TrackerHealth.acquired``): the start is
-        the initial prior's job, and a jump-wide prior there let the first images swing a
-        shoulder 35 deg to put the arm out of view (a robot rendered nowhere scores 0, a
-        misaligned one less), measured on s-head-arm/constant, 0.7 m from then on."""
-        window = min(max(float(elapsed_s), 0.0), MAX_JUMP_WINDOW_S)
-        return -np.expm1(-self._jump_rate * window)
-
-    def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf,
-                health: TrackerHealth | None = None) -> ImageOutcome:
-        """The image's observation relative to ``prior`` (None if it has no valid pixel),
-        and its consistency with the estimate; ``elapsed_s`` is the time since the
-        previous applied image; ``health`` the tracker's before this image (default: it
-        holds the arm): until the arm is ``acquired``, the update searches with
-        ``image.acquisition_num_particles``."""
-        health = TrackerHealth(acquired=True) if health is None else health
-        acquired = health.acquired
-        observation = self.update.prepare(frame.depth_m)
-        check_depth_units(frame.depth_m)  # a millimetre image is an error, not a blank
-        if observation.num_valid == 0:
-            return ImageOutcome(None, None, None)
-        # The image against the belief before it: the predictive check of the health
-        # state, and which of the robot's pixels are hidden behind something.
-        rendered = self.update.renderer.render(prior[MEAN_A][None])[0]
-        image = self.params.image
-        observed = observed_image(observation)  # z and valid pixels: occlusion keeps them
-        predicted = image_consistency(self.image_time(frame), rendered, observed,
-                                      image.likelihood)
-        # Never lost for good: the belief restarts from the encoders (as at the tracker's
-        # start: see ``restart_reason``) before the update.
-        restarted, misplaced = False, False
-        restart = self.restart  # a forced restart: to the tracker's start, nominal camera
-        if self.params.use_joint_readings:
-            candidate = restart.apply(prior)
-            rendered_enc = self.update.renderer.render(candidate[MEAN_A][None])[0]
-            encoders = image_consistency(predicted.time_s, rendered_enc, observed,
-                                         image.likelihood)
-            misplaced = is_misplaced(predicted, encoders, self.params.health)
-            reason = self.restart_reason(predicted, encoders, health)
-            if reason:
-                log.warning("image %d at %.3f s: %s; the belief restarts from the encoders",
-                            frame.sequence, predicted.time_s, reason)
-                restarted, misplaced, acquired = True, False, False
-                prior, rendered, predicted = candidate, rendered_enc, encoders
-            elif shows_no_arm(predicted, encoders, health, self.params.health):
-                return ImageOutcome(None, None, predicted, challenger=health.challenger,
-                                    skip_reason=(
-                    f"it sees through {predicted.see_through:.0%} of the arm where the "
-                    f"estimate puts it and {encoders.see_through:.0%} where the encoders do: "
-                    f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
-        plain = observation
-        observation = self._occlusion_aware(observation, rendered, predicted)
-        # A bias jump is tested only on an image that sees enough of the arm (the health's
-        # min_robot_pixels unhidden at the prior mean). On one that does not, the jump
-        # particles meet a flat likelihood and their Monte-Carlo noise became the estimate:
-        # occlusion-heavy seed 2, 22 visible pixels, a 3.8 deg move of one joint (22 prior
-        # sigmas) for 2.2 nats, kept for the rest of the occlusion (README, "A bias that
-        # outlasts an occlusion").
-        jumps = self.jump_probability(elapsed_s)
-        if restarted or predicted.visible_robot_pixels < self.params.health.min_robot_pixels:
-            jumps = np.zeros_like(jumps)
-        elif np.any(jumps > 0):
-            # Nor of a joint whose jump the image would not see (see core/jump_visibility):
-            # measured, a forearm leaving the view let the elbow's jumps walk it 120 deg in
-            # 4 s, folded out of sight, and it never came back (1 m at 116 s of the
-            # default scenario, health tracking on what was still rendered).
-            joints = np.flatnonzero(jumps > 0)
-            testable = jump_testable(self.update.renderer, prior[MEAN_A], joints,
-                                     self._jump_std, rendered, observed,
-                                     image.likelihood, image.min_jump_pixels,
-                                     self.consistent(predicted))
-            jumps[joints[~testable]] = 0.0
-        rng = image_rng(self.params.image.seed, frame.sequence)
-        # An arm never held since the start or a restart: the search may be widened in
-        # depth (image.search_depth_widening_m).
-        never_held = not acquired and (restarted or not np.isfinite(health.confirmed_s))
-        result = self.update(prior, observation, rng, jumps, self._jump_std,
-                             None if acquired else self.params.image.acquisition_num_particles,
-                             coarse_sweeps=acquired, widened=never_held)
-        if result is None:
-            return ImageOutcome(None, None, None)
-        # (A restart above has cleared ``acquired``.) A second opinion from the encoders'
-        # arm on an image that contradicts the held arm, or that sees it again.
-        if self.params.use_joint_readings and not restarted and (
-                is_reacquiring(health, predicted, self.params.health) if not acquired
-                else is_surprising(predicted, self.params.health, health.latest)):
-            overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
-                                                  rng, frame.sequence)
-        else:
-            overrule = None
-        # While the estimate's biases are implausible, a challenger belief searches from
-        # the encoders' arm over several images (see core/robustness/second_opinion.py).
-        challenger = None
-        if self.params.use_joint_readings and not restarted and overrule is None:
-            overrule, challenger = self.search.challenge(plain, prior, result, health,
-                                                         predicted.time_s, rng, frame.sequence)
-        if overrule is not None:
-            restarted, misplaced = True, False
-            prior, result, restart = overrule.prior, overrule.result, overrule.restart
-        # A degenerate particle set would claim certainty; floor the posterior variance
-        # at the Monte-Carlo resolution of the prior.
-        floor = np.maximum(prior[VAR_A] / self.update.num_particles, 1e-14)
-        variance = np.maximum(result.variance, floor)
-        if result.flat_likelihood:  # the image says nothing: the belief stays as it is
-            zero = np.zeros_like(prior[MEAN_A])
-            observation = AngleObservation(zero, zero)
-        else:
-            observation = AngleObservation.from_posterior(prior, result.mean, variance)
-        if restarted:
-            observation = replace(observation, restart=restart)
-        return ImageOutcome(observation, result, predicted, restarted, misplaced,
-                            challenger=challenger)
-
-    def restart_reason(self, estimate: ImageConsistency, encoders: ImageConsistency,
-                       health: TrackerHealth) -> str:
-        """Why an image restarts the belief from the encoders ("": it does not), given its
-        consistency with the estimate's arm and with the encoders' (zero bias):
-
-        * it contradicts the estimate, or cannot see it, while it agrees with the
-          encoders' arm, and on more pixels;
-        * the estimate has put the arm out of view while the encoders put it in view
-          (``is_misplaced``) for ``health.restart_after_misplaced_s``. Measured: a second
-          of images without the arm (the fault matrix's arm_out_of_view) moved the
-          estimate out of view, which explains them best, and then no image could bring
-          it back (840 mm 4 s after the arm returned).
-        """
-        if not self.consistent(estimate) and self.consistent(encoders) and (
-                agreeing_pixels(encoders) > agreeing_pixels(estimate)):
-            return "it agrees with the encoders' arm and not with the estimate"
-        if is_misplaced(estimate, encoders, self.params.health) and restart_due(
-                health, estimate.time_s, self.params.health):
-            return (f"the estimate has put the arm out of view since "
-                    f"{health.misplaced_since_s:.3f} s while the encoders put it in view")
-        return ""
-
-    def _occlusion_aware(self, observation, rendered: np.ndarray,
-                         predicted: ImageConsistency):
-        """The observation with the per-pixel occlusion estimate read at ``rendered``.
-
-        Which pixels hide the robot is read at the prior mean: only meaningful while the
-        image does not contradict it. After a bias step, or from a wrong start, the true
-        arm in front of the prior's would be taken for an occluder, and the arm could then
-        hide behind the scene at no cost: measured, s-full-arm with 8.6 deg of constant
-        bias diverged to 0.9 m without this condition, and converged with it."""
-        image = self.params.image
-        if not image.estimate_occlusion or \
-                predicted.see_through > self.params.health.max_see_through:
-            return observation
-        fraction = image_occlusion(predicted, image.likelihood, image.occlusion_prior_pixels)
-        return with_pixel_occlusion(observation,
-                                    pixel_occlusion(observation, rendered, fraction))
-
-    def consistent(self, image: ImageConsistency) -> bool:
-        """``is_consistent`` under the tracker's health parameters."""
-        return is_consistent(image, self.params.health)
-
-
-def jump_window_s(image_time_s: float, last_applied_image_s: float,
-                  health: TrackerHealth) -> float:
-    """The time a bias jump is looked for before an image (``ImageProcessor.observe``'s
-    ``elapsed_s``): since the previous applied image, or 0 until the tracker has acquired
-    the arm (see ``ImageProcessor.jump_probability``)."""
-    return image_time_s - last_applied_image_s if health.acquired else 0.0
-
-
-def make_bank_and_prior(model: TrackerModel, params: TrackerParams, first_reading: np.ndarray | None
-                        ) -> tuple[JointKalmanBank, np.ndarray]:
-    """The Kalman bank for ``model`` and the initial (5, n) belief: angles at the first
-    reading of the robot joints (or ``initial_positions_rad``), virtual joints at 0."""
-    validate_tracker_params(params)
-    names = model.joint_names
-    prismatic = model.prismatic_joint_names
-    bank = JointKalmanBank(resolve_kalman_params(params, names, prismatic))
-    noise = joint_noise_for(params, names, prismatic)
-    mean = np.zeros(len(names))
-    unknown = sorted(set(params.initial_positions_rad) - set(names))
-    if unknown:
-        raise ValueError(f"initial_positions_rad: unknown joint names {unknown}")
-    for name, value in params.initial_positions_rad.items():
-        mean[names.index(name)] = value
-    if first_reading is not None:
-        robot = robot_joint_indices(model)
-        mean[robot] = first_reading
-    prior = initial_moments(mean, np.array([j.initial_angle_std_rad for j in noise]),
-                            np.array([j.initial_bias_std_rad for j in noise]),
-                            bank.params.has_bias)
-    return bank, prior
-
-
-def camera_chain_joints(model: TrackerModel) -> list[str]:
-    """The robot joints that move the camera (e.g. a pan-tilt head), base first."""
-    plant = model.plant
-    camera_body = model.nominal_camera_frame.body().index()
-    chain = []
-    for name in model.robot_joint_names:
-        joint = plant.GetJointByName(name)
-        if camera_body in plant.GetBodiesKinematicallyAffectedBy([joint.index()]):
-            chain.append(name)
-    return chain
-
-
-def image_time(frame: DepthFrame, params: TrackerParams) -> float:
-    """The time t' an image is applied at: its capture stamp minus the configured offset."""
-    return float(frame.capture_time_s) - params.image.image_time_offset_s
-
-
-def new_belief_buffer(model: TrackerModel, params: TrackerParams, t: float,
-                      first_reading: np.ndarray | None) -> BeliefBuffer:
-    """The delay buffer started at ``t`` from the first reading (None: vision only)."""
-    bank, prior = make_bank_and_prior(model, params, first_reading)
-    return BeliefBuffer(bank, prior, t, params.buffer_horizon_s,
-                        params.max_interpolation_gap_s)
-
-
-def robot_joint_indices(model: TrackerModel) -> np.ndarray:
-    """Indices of the robot (measured) joints within ``model.joint_names``."""
-    return np.array([model.joint_names.index(n) for n in model.robot_joint_names], int)
-
-
-def full_reading(model: TrackerModel, robot_reading: np.ndarray,
-                 robot_indices: np.ndarray | None = None) -> np.ndarray:
-    """The bank's reading vector: the robot joints' readings, 0 for the virtual joints.
-    ``robot_indices``: ``robot_joint_indices(model)``, for a caller that keeps it."""
-    q = np.zeros(model.num_joints)
-    q[robot_joint_indices(model) if robot_indices is None else robot_indices] = robot_reading
-    return q
+def conclude_image(outcome: ImageOutcome, health: TrackerHealth,
+                   params: HealthParams) -> ImageVerdict:
+    """Step 5: an image update's outcome against the health before it."""
+    if outcome.observation is None and outcome.consistency is not None:
+        after = next_health(health, outcome.consistency, params,
+                            challenger=outcome.challenger)
+        return ImageVerdict(None, after, outcome.skip_reason, "images that show no arm")
+    if outcome.observation is None:
+        return ImageVerdict(None, health, "no valid depth pixel",
+                            "images without a valid pixel")
+    after = next_health(health, outcome.consistency, params, outcome.restarted,
+                        outcome.misplaced, outcome.challenger)
+    return ImageVerdict(outcome.observation, after)

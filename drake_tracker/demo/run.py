@@ -44,7 +44,8 @@ import numpy as np
 from drake_tracker.io.recording import RecordedRun
 from drake_tracker.io.replay import encoders_only_X_CE
 from drake_tracker.metrics import format_report_table, method_report, pose_errors
-from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
+from drake_tracker.params.loading import load_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.robot.model import build_tracker_model
 from drake_tracker.sim.scenario.load import Scenario, load_scenario
 
@@ -127,9 +128,11 @@ def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
     from drake_tracker.systems.point_cloud import DepthFrameToPointCloud
 
     def hook(builder, world):
-        tracker = AddTracker(builder, world.model, world.intrinsics, params,
-                             world.port("measured_position"), world.port("measurement_time"),
-                             world.port("depth_frame"), world.encoder_period_s)
+        tracker = AddTracker(builder, model=world.model, camera=world.intrinsics, params=params,
+                             measured_position=world.port("measured_position"),
+                             measurement_time=world.port("measurement_time"),
+                             depth=world.port("depth_frame"),
+                             encoder_period_s=world.encoder_period_s)
         period = 1.0 / 30.0
         MeshcatVisualizer.AddToBuilder(
             builder, world.scene_graph, meshcat,
@@ -219,7 +222,7 @@ def write_diagram(graphviz: str, out: Path) -> Path | None:
     import shutil
     import subprocess
 
-    from drake_tracker.cli.args import note
+    from drake_tracker.progress import note
 
     (out / "diagram.dot").write_text(graphviz)
     if shutil.which("dot") is None:

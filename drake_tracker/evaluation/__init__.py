@@ -13,12 +13,12 @@ percentiles over all seeds, the median over seeds and the worst seed), ``summary
 plots and time series (``plots``).
 """
 
+from drake_tracker.evaluation.executor_choice import make_executor
 from drake_tracker.evaluation.executors import (
     Executor,
     Outcome,
     ProcessExecutor,
     SerialExecutor,
-    make_executor,
 )
 from drake_tracker.evaluation.plots import plot_results
 from drake_tracker.evaluation.results import ResultStore

@@ -227,14 +227,3 @@ def _terminate(processes) -> None:
         if process.is_alive():
             process.kill()
             process.join(1.0)
-
-
-def make_executor(name: str, workers: int = 2, address: str | None = None) -> Executor:
-    """The executor ``--executor NAME`` stands for (``local`` with 1 worker: serial)."""
-    if name == "local":
-        return SerialExecutor() if workers <= 1 else ProcessExecutor(workers)
-    if name == "ray":
-        from drake_tracker.evaluation.ray_executor import RayExecutor
-
-        return RayExecutor(address=address, num_cpus=workers if address is None else None)
-    raise ValueError(f"unknown executor '{name}'; known: local, ray")

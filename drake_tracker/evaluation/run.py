@@ -13,7 +13,8 @@ from contextlib import closing
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drake_tracker.evaluation.executors import Executor, SerialExecutor, make_executor
+from drake_tracker.evaluation.executor_choice import make_executor
+from drake_tracker.evaluation.executors import Executor, SerialExecutor
 from drake_tracker.evaluation.methods import METHODS
 from drake_tracker.evaluation.paper_comparison import format_paper_comparison, paper_comparison
 from drake_tracker.evaluation.plots import plot_results
@@ -178,7 +179,7 @@ def _parse(args) -> list[Task]:
         raise SystemExit("--address is for --executor ray")
     params_yaml = ""
     if args.params:
-        from drake_tracker.params.tracker_params import load_tracker_params, tracker_params_to_yaml
+        from drake_tracker.params.loading import load_tracker_params, tracker_params_to_yaml
 
         params_yaml = tracker_params_to_yaml(load_tracker_params(args.params))
     tasks = make_tasks(args.quick, args.seeds, methods, params_yaml, args.duration)

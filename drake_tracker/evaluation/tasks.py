@@ -128,7 +128,8 @@ def task_base_params(task: Task) -> TrackerParams | None:
         return None
     from pydrake.common.yaml import yaml_load_typed
 
-    from drake_tracker.params.tracker_params import TrackerParams, validate_tracker_params
+    from drake_tracker.params.tracker_params import TrackerParams
+    from drake_tracker.params.validation import validate_tracker_params
 
     params = yaml_load_typed(schema=TrackerParams, data=task.params_yaml)
     validate_tracker_params(params)

@@ -21,12 +21,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_tracker.core.filter.estimate import PoseReadout
-from drake_tracker.core.image_step import full_reading
+from drake_tracker.core.filter.start import full_reading
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
 from drake_tracker.io.recording import RecordedRun
 from drake_tracker.metrics import format_report_table, method_report
-from drake_tracker.params.tracker_params import TrackerParams, load_tracker_params
+from drake_tracker.params.loading import load_tracker_params
+from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.progress import count_bar
 from drake_tracker.robot.model import (
     RobotConfig,

@@ -15,8 +15,8 @@ import numpy as np
 from pydrake.common.yaml import yaml_dump
 
 from drake_tracker.core.filter.estimate import PoseReadout
-from drake_tracker.core.image_step import robot_joint_indices
-from drake_tracker.core.render.backends import default_view_configuration, make_renderer
+from drake_tracker.core.render.backends import make_renderer
+from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.io.recording import RecordedRun
 
@@ -43,7 +43,7 @@ def synthetic_run(model: TrackerModel, duration_s: float = 1.0, encoder_rate_hz:
     camera = camera or CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
     offset = (np.array([0.01, -0.01, 0.01, 0.017, -0.017, 0.017]) if camera_offset is None
               else np.asarray(camera_offset, float))
-    robot = robot_joint_indices(model)
+    robot = model.robot_joint_indices
     home = default_view_configuration(model)
     phases = np.linspace(0.0, np.pi, len(robot))
 

@@ -1,3 +1,2 @@
 """The robot model, the one source of truth: a URDF, SDF or vendor package loaded into a
-MultibodyPlant, with the six virtual camera joints.
-"""
+MultibodyPlant, with the six virtual camera joints (``build_tracker_model``)."""

@@ -337,6 +337,11 @@ class TrackerModel:
         return np.array([self.joint_names.index(n) for n in VIRTUAL_JOINT_NAMES])
 
     @property
+    def robot_joint_indices(self) -> np.ndarray:
+        """Indices of the robot (measured) joints within ``joint_names``."""
+        return np.array([self.joint_names.index(n) for n in self.robot_joint_names], int)
+
+    @property
     def robot_joint_names(self) -> list[str]:
         """The robot's own joints in position order: the order of the encoder readings."""
         return [n for n in self.joint_names if n not in VIRTUAL_JOINT_NAMES]

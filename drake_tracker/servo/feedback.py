@@ -120,10 +120,11 @@ def AddFeedback(builder: DiagramBuilder, world: ServoWorld, feedback: str,
     if "depth_frame" not in world.ports:
         raise ValueError("feedback 'tracker' needs the world's depth camera "
                          "(AddServoWorld(..., with_camera=True))")
-    tracker = AddTracker(builder, world.model, camera_model(world.scenario),
-                         params or TrackerParams(), world.ports["measured_position"],
-                         world.ports["measurement_time"], world.ports["depth_frame"],
-                         world.encoder_period_s)
+    tracker = AddTracker(builder, model=world.model, camera=camera_model(world.scenario),
+                         params=params or TrackerParams(),
+                         measured_position=world.ports["measured_position"],
+                         measurement_time=world.ports["measurement_time"],
+                         depth=world.ports["depth_frame"], encoder_period_s=world.encoder_period_s)
     # The tracker estimates every model joint (the virtual camera joints too): keep the
     # robot's, in robot_joint_names order.
     names = world.model.joint_names

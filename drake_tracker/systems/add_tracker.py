@@ -1,10 +1,12 @@
 """``AddTracker``: wires the three tracker systems into a user's DiagramBuilder.
 
 Event times within one encoder period ``h`` (readings are stamped at multiples of h):
-the delay buffer updates at ``h/4`` (records reading k, applies a new image
-observation), the Kalman bank at ``h/2`` (adopts the buffer's correction, then filters
-reading k if the correction did not already include it), and the CPF system at ``3h/4``
-(reads the buffer's prior for a newly arrived image). Every exchange goes through
+the delay buffer updates at ``h/4`` (passes reading k through the readings' one gate,
+records it, applies a new image observation), the Kalman bank at ``h/2`` (adopts the
+buffer's correction, then filters the reading the gate admitted if the correction did
+not already include it), and the CPF system at ``3h/4`` (reads the buffer's prior for
+a newly arrived image). The parameters are checked and resolved once, here, and the
+three systems share the resolved object. Every exchange goes through
 state, so there is no algebraic loop, and the bank's estimate after its update equals
 the offline :class:`~drake_tracker.tracker.Tracker`'s after the same reading, except
 within ``image.update_latency_s`` of an applied image's arrival: the Diagram applies an
@@ -20,12 +22,14 @@ A port of the package's own ``DepthFrame`` is connected as it is.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 
 from drake_tracker.core.sensors.camera import as_intrinsics
+from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
 from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
@@ -43,60 +47,117 @@ if TYPE_CHECKING:
 ESTIMATE_PORTS = ("estimated_position", "position_variance", "bias", "bias_variance",
                   "camera_offset", "X_CE", "X_WE", "X_WC", "belief")
 
+#: The order of the positional call of the previous release (deprecated).
+_POSITIONAL = ("model", "camera", "params", "measured_position", "measurement_time", "depth",
+               "encoder_period_s", "image_check_period_s", "name", "image_time")
+
 
 @dataclass
 class TrackerSystems:
-    """The systems ``AddTracker`` added, and its output ports by name."""
+    """The systems ``AddTracker`` added, and the tracker's output ports.
+
+    The port fields are the ports to connect: ``X_CE`` (the hand in the estimated
+    camera frame, a ``RigidTransform``), ``X_WE`` and ``X_WC`` (the hand and the
+    estimated camera in the model's world), ``estimated_position``,
+    ``position_variance``, ``bias``, ``bias_variance`` (each n = ``model.num_joints``,
+    virtual joints included), ``camera_offset`` (the six virtual joints), ``belief``
+    (the (5, n) moments, row-major) and ``health`` (a ``TrackerHealth``: fall back to the
+    encoders while its ``state`` is ``HealthState.LOST``).
+    """
 
     kalman_bank: JointKalmanBankSystem
     delay_buffer: DelayBufferSystem
     image_update: CpfImageUpdateSystem
-    model: object
+    model: TrackerModel
     #: The image converter, when the depth input is a Drake image port.
-    depth_adapter: DepthImageToFrame | None = None
+    depth_adapter: DepthImageToFrame | None
+    X_CE: OutputPort
+    X_WE: OutputPort
+    X_WC: OutputPort
+    estimated_position: OutputPort
+    position_variance: OutputPort
+    bias: OutputPort
+    bias_variance: OutputPort
+    camera_offset: OutputPort
+    belief: OutputPort
+    health: OutputPort
 
     def port(self, name: str) -> OutputPort:
-        """An estimate output port (``ESTIMATE_PORTS``) of the Kalman bank, or ``health``
-        (``TrackerHealth`` after the latest image: fall back to the encoders while its
-        ``state`` is ``HealthState.LOST``)."""
-        if name == "health":
-            return self.image_update.GetOutputPort("health")
-        if name not in ESTIMATE_PORTS:
+        """The output port called ``name`` (``ESTIMATE_PORTS`` or ``health``); the fields
+        are the same ports."""
+        if name != "health" and name not in ESTIMATE_PORTS:
             raise ValueError(f"unknown tracker output '{name}'; known: "
                              f"{list(ESTIMATE_PORTS) + ['health']}")
-        return self.kalman_bank.GetOutputPort(name)
+        return getattr(self, name)
 
 
-def AddTracker(builder: DiagramBuilder, model: TrackerModel,
-               camera: CameraIntrinsics | CameraInfo | DepthRenderCamera | RenderCameraCore,
-               params: TrackerParams,
-               measured_position: OutputPort, measurement_time: OutputPort,
-               depth: OutputPort, encoder_period_s: float,
-               image_check_period_s: float | None = None, name: str = "tracker",
-               image_time: OutputPort | None = None) -> TrackerSystems:
-    """Adds the tracker for ``model`` (``build_tracker_model``) to ``builder``.
+def AddTracker(builder: DiagramBuilder, *args: Any,
+               model: TrackerModel | None = None,
+               camera: CameraIntrinsics | CameraInfo | DepthRenderCamera | RenderCameraCore
+               | None = None,
+               params: TrackerParams | None = None,
+               measured_position: OutputPort | None = None,
+               measurement_time: OutputPort | None = None,
+               depth: OutputPort | None = None,
+               image_time: OutputPort | None = None,
+               encoder_period_s: float | None = None,
+               image_check_period_s: float | None = None,
+               name: str = "tracker") -> TrackerSystems:
+    """Adds the tracker for ``model`` to ``builder`` and connects its inputs; returns the
+    systems and the output ports (:class:`TrackerSystems`). Every argument after
+    ``builder`` is keyword-only (the positional call of the previous release still works,
+    with a ``DeprecationWarning``, until the next release).
 
     Args:
+        model: the tracker's model (``build_tracker_model``).
         camera: the depth camera's model: Drake's ``CameraInfo`` or
             ``DepthRenderCamera`` (e.g. ``sensor.default_depth_render_camera()``), or a
             ``CameraIntrinsics``; full resolution of the depth images.
+        params: the tracker's parameters (default: ``TrackerParams()``); validated and
+            resolved against ``model`` once, here.
         measured_position: the robot joints' encoder readings, in
             ``model.robot_joint_names`` order.
         measurement_time: the readings' time stamp (s), a 1-vector.
         depth: an ``ImageDepth32F`` (metres) or ``ImageDepth16U`` (millimetres, 0 =
             invalid) port, e.g. an RgbdSensor's depth output held by an
             ``ImageStamper``, or ``RgbdSensorAsync``'s; or a ``DepthFrame`` port.
+        image_time: with an image port, the images' capture time (s), a 1-vector;
+            a new value marks a new image. Not with a ``DepthFrame`` port.
         encoder_period_s: the encoder's sample period (s); the bank and buffer update at
             this rate.
         image_check_period_s: how often the tracker looks for a new image (default:
             ``encoder_period_s``); an image waits at most this long.
-        image_time: with an image port, the images' capture time (s), a 1-vector;
-            a new value marks a new image.
+        name: the prefix of the added systems' names.
     """
+    if args:
+        if len(args) > len(_POSITIONAL):
+            raise TypeError(f"AddTracker takes at most {len(_POSITIONAL) + 1} positional "
+                            f"arguments, got {len(args) + 1}")
+        warnings.warn("AddTracker's positional arguments are deprecated and will be "
+                      "removed in the next release: pass everything after the builder by "
+                      "keyword (model=..., camera=..., ...)", DeprecationWarning,
+                      stacklevel=2)
+        given = dict(zip(_POSITIONAL, args, strict=False))
+        passed = {"model": model, "camera": camera, "params": params,
+                  "measured_position": measured_position,
+                  "measurement_time": measurement_time, "depth": depth,
+                  "encoder_period_s": encoder_period_s,
+                  "image_check_period_s": image_check_period_s, "image_time": image_time}
+        twice = [k for k in given if k in passed and passed[k] is not None]
+        if twice:
+            raise TypeError(f"AddTracker got {twice} both by position and by keyword")
+        return AddTracker(builder, **{**passed, "name": name, **given})
+    missing = [k for k, v in (("model", model), ("camera", camera),
+                              ("measured_position", measured_position),
+                              ("measurement_time", measurement_time), ("depth", depth),
+                              ("encoder_period_s", encoder_period_s)) if v is None]
+    if missing:
+        raise TypeError(f"AddTracker: missing keyword argument(s) {missing}")
     h = float(encoder_period_s)
     if not h > 0:
         raise ValueError(f"AddTracker: encoder_period_s must be > 0, got {encoder_period_s}")
     check = h if image_check_period_s is None else float(image_check_period_s)
+    resolved = resolve_tracker_params(TrackerParams() if params is None else params, model)
     intrinsics = as_intrinsics(camera)
     kind = depth_port_kind(depth)
     adapter = None
@@ -105,27 +166,31 @@ def AddTracker(builder: DiagramBuilder, model: TrackerModel,
             raise ValueError("AddTracker: a depth image port needs its capture time: pass "
                              "image_time (RgbdSensorAsync's image_time, or an "
                              "ImageStamper's)")
-        adapter = builder.AddNamedSystem(f"{name}_depth_image_to_frame",
-                                         DepthImageToFrame(kind, check, 0.625 * h))
-        builder.Connect(depth, adapter.GetInputPort("depth_image"))
-        builder.Connect(image_time, adapter.GetInputPort("image_time"))
-        depth = adapter.GetOutputPort("depth_frame")
+        adapter = builder.AddNamedSystem(
+            f"{name}_depth_image_to_frame",
+            DepthImageToFrame(encoding=kind, period_s=check, offset_s=0.625 * h))
+        builder.Connect(depth, adapter.get_depth_image_input_port())
+        builder.Connect(image_time, adapter.get_image_time_input_port())
+        depth = adapter.get_depth_frame_output_port()
     elif image_time is not None:
         raise ValueError("AddTracker: image_time goes with an image port; a DepthFrame "
                          "carries its own capture time")
-    buffer = builder.AddNamedSystem(f"{name}_delay_buffer",
-                                    DelayBufferSystem(model, params, h, 0.25 * h))
-    bank = builder.AddNamedSystem(f"{name}_kalman_bank",
-                                  JointKalmanBankSystem(model, params, h, 0.5 * h))
-    cpf = builder.AddNamedSystem(f"{name}_image_update",
-                                 CpfImageUpdateSystem(model, intrinsics, params, check, 0.75 * h))
-    for system in (buffer, bank):
-        builder.Connect(measured_position, system.GetInputPort("measured_position"))
-        builder.Connect(measurement_time, system.GetInputPort("measurement_time"))
-    builder.Connect(depth, buffer.GetInputPort("depth_frame"))
-    builder.Connect(depth, cpf.GetInputPort("depth_frame"))
-    builder.Connect(buffer.GetOutputPort("correction"), bank.GetInputPort("correction"))
-    builder.Connect(buffer.GetOutputPort("image_prior"), cpf.GetInputPort("image_prior"))
-    builder.Connect(cpf.GetOutputPort("image_observation"),
-                    buffer.GetInputPort("image_observation"))
-    return TrackerSystems(bank, buffer, cpf, model, adapter)
+    buffer = builder.AddNamedSystem(f"{name}_delay_buffer", DelayBufferSystem(
+        model=model, params=resolved, period_s=h, offset_s=0.25 * h))
+    bank = builder.AddNamedSystem(f"{name}_kalman_bank", JointKalmanBankSystem(
+        model=model, params=resolved, period_s=h, offset_s=0.5 * h))
+    cpf = builder.AddNamedSystem(f"{name}_image_update", CpfImageUpdateSystem(
+        model=model, camera=intrinsics, params=resolved, period_s=check,
+        offset_s=0.75 * h))
+    builder.Connect(measured_position, buffer.get_measured_position_input_port())
+    builder.Connect(measurement_time, buffer.get_measurement_time_input_port())
+    builder.Connect(depth, buffer.get_depth_frame_input_port())
+    builder.Connect(depth, cpf.get_depth_frame_input_port())
+    builder.Connect(buffer.get_reading_output_port(), bank.get_reading_input_port())
+    builder.Connect(buffer.get_correction_output_port(), bank.get_correction_input_port())
+    builder.Connect(buffer.get_image_prior_output_port(), cpf.get_image_prior_input_port())
+    builder.Connect(cpf.get_image_observation_output_port(),
+                    buffer.get_image_observation_input_port())
+    ports = {port: bank.GetOutputPort(port) for port in ESTIMATE_PORTS}
+    return TrackerSystems(bank, buffer, cpf, model, adapter,
+                          health=cpf.get_health_output_port(), **ports)

@@ -8,20 +8,25 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import Context, EventStatus, LeafSystem
+from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
 
-from drake_tracker.core.image_step import ImageProcessor, jump_window_s
-from drake_tracker.core.robustness.health import TrackerHealth, next_health
-from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.core.image_processor import ImageProcessor
+from drake_tracker.core.image_step import ImagePacing, conclude_image
+from drake_tracker.core.robustness.health import TrackerHealth
+from drake_tracker.core.sensors.camera import CameraIntrinsics, as_intrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
 from drake_tracker.core.sensors.timestamps import problem_kind
-from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.systems.image_update_worker import DeadlineWaits, submit_image_update
 from drake_tracker.systems.messages import ImageObservationMessage, ImagePrior
 from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
+    from pydrake.systems.sensors import CameraInfo
+
+    from drake_tracker.core.resolved_params import ResolvedParams
+    from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
 
 log = logging.getLogger(__name__)
@@ -36,8 +41,8 @@ class CpfState(SharedAbstractState):
     last_sequence: int = -1
     #: (sequence, capture stamp) of the last frame seen: a new pair is a new frame.
     last_frame: tuple = ()
-    next_image_due_s: float = float("-inf")
-    last_applied_image_s: float = float("-inf")
+    #: Which images are due (``core/image_step.py``, step 2).
+    pacing: ImagePacing = field(default_factory=ImagePacing)
     message: ImageObservationMessage = field(default_factory=ImageObservationMessage)
     health: TrackerHealth = field(default_factory=TrackerHealth)
     images_applied: int = 0
@@ -93,14 +98,15 @@ class CpfImageUpdateSystem(LeafSystem):
     is the running update.
     """
 
-    def __init__(self, model: TrackerModel, camera: CameraIntrinsics, params: TrackerParams,
-                 period_s: float, offset_s: float = 0.0):
+    def __init__(self, *, model: TrackerModel, camera: CameraIntrinsics | CameraInfo,
+                 params: TrackerParams | ResolvedParams, period_s: float,
+                 offset_s: float = 0.0) -> None:
         super().__init__()
         if not period_s > 0:
             raise ValueError(f"CpfImageUpdateSystem: period_s must be > 0, got {period_s}")
-        self.processor = ImageProcessor(model, camera, params)
+        self._params = params = resolve_tracker_params(params, model)
+        self.processor = ImageProcessor(model, as_intrinsics(camera), params)
         self._period_s = float(period_s)
-        self._health_params = params.health
         self._latency_s = float(params.image.update_latency_s)
         #: Updates on the worker done at their deadline or late (a diagnostic).
         self.deadline_waits = DeadlineWaits()
@@ -111,13 +117,29 @@ class CpfImageUpdateSystem(LeafSystem):
         self._prior_port = self.DeclareAbstractInputPort(
             "image_prior", AbstractValue.Make(ImagePrior()))
         state_ticket = {self.abstract_state_ticket(self._state)}
-        self.DeclareAbstractOutputPort(
+        self._message_port = self.DeclareAbstractOutputPort(
             "image_observation", lambda: AbstractValue.Make(ImageObservationMessage()),
-            self._calc_message, state_ticket)
-        self.DeclareAbstractOutputPort(
-            "health", lambda: AbstractValue.Make(TrackerHealth()), self._calc_health,
-            state_ticket)
+            lambda c, o: o.set_value(self.state(c).message), state_ticket)
+        self._health_port = self.DeclareAbstractOutputPort(
+            "health", lambda: AbstractValue.Make(TrackerHealth()),
+            lambda c, o: o.set_value(self.state(c).health), state_ticket)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
+
+    def get_depth_frame_input_port(self) -> InputPort:
+        """The ``depth_frame`` input port."""
+        return self._frame_port
+
+    def get_image_prior_input_port(self) -> InputPort:
+        """The ``image_prior`` input port."""
+        return self._prior_port
+
+    def get_image_observation_output_port(self) -> OutputPort:
+        """The ``image_observation`` output port."""
+        return self._message_port
+
+    def get_health_output_port(self) -> OutputPort:
+        """The ``health`` output port."""
+        return self._health_port
 
     def state(self, context: Context) -> CpfState:
         """The system's state in ``context`` (counts, health, latest message)."""
@@ -174,23 +196,20 @@ class CpfImageUpdateSystem(LeafSystem):
         that one is applied first, as it would have been without the latency)."""
         if prior is None or prior.anchor is None:
             return False
-        latest = max(s.last_applied_image_s, s.in_flight.prior.image_time_s)
-        return self.processor.wants_at(prior.image_time_s, s.next_image_due_s, latest)
+        pacing = s.pacing.applied(s.in_flight.prior.image_time_s)
+        return pacing.wants(prior.image_time_s)
 
     def _process(self, frame: DepthFrame, prior: ImagePrior, s: CpfState,
                  now_s: float) -> bool | None:
         """Starts the image update on ``frame`` if it is due: None when it runs on the
         worker (``s.in_flight``); else whether it produced a new observation message."""
         t = prior.image_time_s
-        if prior.sequence == frame.sequence and t == t and not self.processor.wants_at(
-                t, s.next_image_due_s, s.last_applied_image_s):
+        if prior.sequence == frame.sequence and t == t and not s.pacing.wants(t):
             return False  # not due (NaN: its stamp was rejected)
         if prior.anchor is None or prior.sequence != frame.sequence:
             return self._skip(frame, prior.problem)
-        if t >= s.last_applied_image_s:  # an out-of-order image does not pace the rest
-            s.next_image_due_s = self.processor.next_due(t, s.next_image_due_s)
-        args = (frame, prior.anchor.prior, jump_window_s(t, s.last_applied_image_s, s.health),
-                s.health)
+        s.pacing = s.pacing.taken_up(t, self._params.image.min_image_interval_s)
+        args = (frame, prior.anchor.prior, s.pacing.jump_window_s(t, s.health), s.health)
         if self._latency_s > 0:
             outcome = submit_image_update(self.processor.observe, *args)
             s.in_flight = ImageUpdateInFlight(frame, prior, now_s + self._latency_s, outcome)
@@ -211,26 +230,17 @@ class CpfImageUpdateSystem(LeafSystem):
                        else outcome.result())
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(frame, f"{type(err).__name__}: {err}")
+        verdict = conclude_image(outcome, s.health, self._params.health)
+        s.health = verdict.health
+        if verdict.observation is None:
+            return self._skip(frame, verdict.problem, verdict.kind)
         t = prior.image_time_s
-        if outcome.observation is None and outcome.consistency is not None:
-            s.health = next_health(s.health, outcome.consistency, self._health_params,
-                                   challenger=outcome.challenger)
-            return self._skip(frame, outcome.skip_reason)
-        if outcome.observation is None:
-            return self._skip(frame, "no valid depth pixel")
         s.message = ImageObservationMessage(s.message.id + 1, frame.sequence, t,
-                                            outcome.observation, prior.anchor)
-        s.health = next_health(s.health, outcome.consistency, self._health_params,
-                               outcome.restarted, outcome.misplaced, outcome.challenger)
-        s.last_applied_image_s = max(t, s.last_applied_image_s)
+                                            verdict.observation, prior.anchor)
+        s.pacing = s.pacing.applied(t)
         return True
 
-    def _skip(self, frame: DepthFrame, problem: str) -> bool:
-        self._warnings.warn(problem_kind(problem), f"image {frame.sequence} skipped: {problem}")
+    def _skip(self, frame: DepthFrame, problem: str, kind: str = "") -> bool:
+        self._warnings.warn(kind or problem_kind(problem),
+                            f"image {frame.sequence} skipped: {problem}")
         return False
-
-    def _calc_message(self, context, output):
-        output.set_value(self.state(context).message)
-
-    def _calc_health(self, context, output):
-        output.set_value(self.state(context).health)

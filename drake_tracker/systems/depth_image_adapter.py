@@ -15,7 +15,13 @@ import logging
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem, OutputPort
+from pydrake.systems.framework import (
+    DiagramBuilder,
+    EventStatus,
+    InputPort,
+    LeafSystem,
+    OutputPort,
+)
 from pydrake.systems.sensors import ImageDepth16U, ImageDepth32F
 
 from drake_tracker.core.sensors.depth_frames import DepthFrame, depth_to_metres
@@ -65,7 +71,7 @@ class ImageStamper(LeafSystem):
     ``image_time`` (1-vector, s) is NaN before the first sample.
     """
 
-    def __init__(self, period_s: float, model_image: object, offset_s: float = 0.0):
+    def __init__(self, *, period_s: float, model_image: object, offset_s: float = 0.0) -> None:
         super().__init__()
         if not period_s > 0:
             raise ValueError(f"ImageStamper: period_s must be > 0, got {period_s}")
@@ -73,9 +79,21 @@ class ImageStamper(LeafSystem):
             "image", AbstractValue.Make(model_image))
         self._image = self.DeclareAbstractState(AbstractValue.Make(model_image))
         self._time = self.DeclareDiscreteState([np.nan])
-        self.DeclareStateOutputPort("image", self._image)
-        self.DeclareStateOutputPort("image_time", self._time)
+        self._image_output = self.DeclareStateOutputPort("image", self._image)
+        self._time_output = self.DeclareStateOutputPort("image_time", self._time)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._sample)
+
+    def get_image_input_port(self) -> InputPort:
+        """The ``image`` input port."""
+        return self._image_input
+
+    def get_image_output_port(self) -> OutputPort:
+        """The ``image`` output port."""
+        return self._image_output
+
+    def get_image_time_output_port(self) -> OutputPort:
+        """The ``image_time`` output port."""
+        return self._time_output
 
     def _sample(self, context, state) -> None:
         image = self._image_input.Eval(context)
@@ -88,8 +106,9 @@ def AddImageStamper(builder: DiagramBuilder, image: OutputPort, period_s: float,
     """Adds an :class:`ImageStamper` that samples the port ``image`` (any Drake image,
     e.g. an RgbdSensor's ``depth_image_32f``) every ``period_s``."""
     stamper = builder.AddNamedSystem(
-        name, ImageStamper(period_s, image.Allocate().get_value(), offset_s))
-    builder.Connect(image, stamper.GetInputPort("image"))
+        name, ImageStamper(period_s=period_s, model_image=image.Allocate().get_value(),
+                           offset_s=offset_s))
+    builder.Connect(image, stamper.get_image_input_port())
     return stamper
 
 
@@ -124,7 +143,7 @@ class DepthImageToFrame(LeafSystem):
     warning otherwise.
     """
 
-    def __init__(self, encoding: str, period_s: float, offset_s: float = 0.0):
+    def __init__(self, *, encoding: str, period_s: float, offset_s: float = 0.0) -> None:
         super().__init__()
         if not period_s > 0:
             raise ValueError(f"DepthImageToFrame: period_s must be > 0, got {period_s}")
@@ -133,8 +152,20 @@ class DepthImageToFrame(LeafSystem):
             "depth_image", AbstractValue.Make(_image_type(encoding)()))
         self._time_input = self.DeclareVectorInputPort("image_time", 1)
         self._frame = self.DeclareAbstractState(AbstractValue.Make(DepthFrame.empty()))
-        self.DeclareStateOutputPort("depth_frame", self._frame)
+        self._frame_output = self.DeclareStateOutputPort("depth_frame", self._frame)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._convert)
+
+    def get_depth_image_input_port(self) -> InputPort:
+        """The ``depth_image`` input port."""
+        return self._image_input
+
+    def get_image_time_input_port(self) -> InputPort:
+        """The ``image_time`` input port."""
+        return self._time_input
+
+    def get_depth_frame_output_port(self) -> OutputPort:
+        """The ``depth_frame`` output port."""
+        return self._frame_output
 
     def _convert(self, context, state) -> EventStatus | None:
         stamp = float(self._time_input.Eval(context)[0])

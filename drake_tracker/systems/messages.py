@@ -48,3 +48,16 @@ class ImageObservationMessage:
     image_time_s: float = float("nan")
     observation: AngleObservation | None = None
     anchor: ImageAnchor | None = None
+
+
+@dataclass
+class AdmittedReading:
+    """The latest joint reading the delay buffer's gate admitted (id 0: none yet): its
+    time in the tracker's time base and its values; ``restarted`` when the readings'
+    clock restarted at it (the estimate starts again from it). The Kalman bank filters
+    each new one, so the readings pass one gate."""
+
+    id: int = 0
+    time_s: float = float("nan")
+    values: np.ndarray | None = None
+    restarted: bool = False

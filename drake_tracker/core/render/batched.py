@@ -28,7 +28,10 @@ import numpy as np
 
 from drake_tracker.core.jit.numba_threading import SerialOrParallel
 from drake_tracker.core.likelihood.pixel_model import PreparedObservation
-from drake_tracker.core.render.backends import default_view_configuration, random_configurations
+from drake_tracker.core.render.configurations import (
+    default_view_configuration,
+    random_configurations,
+)
 from drake_tracker.core.render.fused_score import (
     fused_scores,
     kernel_workspace,

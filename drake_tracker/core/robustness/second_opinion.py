@@ -51,7 +51,7 @@ from drake_tracker.core.robustness.health import (
 if TYPE_CHECKING:
     from drake_tracker.core.cpf.image_update import CpfImageUpdate
     from drake_tracker.core.likelihood.pixel_model import PreparedObservation
-    from drake_tracker.params.tracker_params import JointNoise, TrackerParams
+    from drake_tracker.core.resolved_params import ResolvedParams
 
 log = logging.getLogger(__name__)
 
@@ -113,26 +113,23 @@ class EncoderSearch:
     """The second opinion and the challenger, over one image update (``update``: a
     ``CpfImageUpdate``); ``occlusion_aware(observation, rendered, consistency)`` reads
     the per-pixel occlusion at a rendered arm (``ImageProcessor._occlusion_aware``);
-    ``noise``, each joint's noise model; ``robot``, (n,) which joints are the robot's
-    (the virtual camera joints' biases are never implausible); ``restart``, the
-    tracker's restart to the encoders' arm."""
+    ``params`` the resolved parameters (each joint's noise model; the virtual camera
+    joints' biases are never implausible); ``restart``, the tracker's restart to the
+    encoders' arm."""
 
-    def __init__(self, update: CpfImageUpdate, params: TrackerParams,
-                 occlusion_aware: Callable, noise: list[JointNoise],
-                 robot: np.ndarray, restart: Restart) -> None:
+    def __init__(self, update: CpfImageUpdate, params: ResolvedParams,
+                 occlusion_aware: Callable, restart: Restart) -> None:
         self.update = update
         self.params = params
         self.restart = restart
-        self._virtual = ~np.asarray(robot, bool)
+        joints = params.joints
+        self._virtual = ~joints.robot
         self._occlusion_aware = occlusion_aware
-        sigma_b = np.array([j.bias_process_std_rad_per_sqrt_s for j in noise])
-        spread = plausible_bias_std(
-            sigma_b, np.array([j.bias_decay_per_s for j in noise]),
-            np.array([j.initial_bias_std_rad for j in noise]),
-            np.array([j.bias_jump_std_rad for j in noise]),
-            np.array([j.bias_jump_rate_per_s for j in noise]))
-        has_bias = np.array([j.has_bias for j in noise])
-        self.plausible_std = np.where(np.asarray(robot, bool) & has_bias, spread, np.inf)
+        sigma_b = joints.bias_process_std
+        spread = plausible_bias_std(sigma_b, joints.bias_decay_per_s,
+                                    joints.initial_bias_std, joints.jump_std,
+                                    joints.declared_jump_rate_per_s)
+        self.plausible_std = np.where(joints.robot & joints.has_bias, spread, np.inf)
         self._growth = sigma_b ** 2  # the bias random walk's variance per second
 
     def _beats(self, result: CPFResult, alternative: CPFResult,

@@ -4,8 +4,12 @@ depth pixel encodings."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from drake_tracker.core.resolved_params import ResolvedParams
 
 
 @dataclass
@@ -58,3 +62,9 @@ def depth_to_metres(pixels: np.ndarray, encoding: str) -> np.ndarray:
                          f"{list(DEPTH_ENCODINGS)}")
     depth[invalid] = np.nan
     return depth
+
+
+def image_time(frame: DepthFrame, params: ResolvedParams) -> float:
+    """The time t' (s) an image is applied at: its capture stamp minus the configured
+    offset (``image.image_time_offset_s``)."""
+    return float(frame.capture_time_s) - params.image.image_time_offset_s

@@ -3,10 +3,8 @@
 non-finite or absurd readings, an encoder gap, gets one warning when it starts and one
 info line when it ends).
 
-Its state can be written as numbers and read back (:meth:`ReadingGate.to_vector`,
-:meth:`ReadingGate.from_vector`), so that a Drake discrete update can carry it (the
-Kalman bank system does); a gate read back is silent (no logger), and takes the
-decisions of the gate it was written from.
+Each stream has one gate: in a Diagram the delay buffer system holds it, and the
+Kalman bank system filters the readings it admitted.
 """
 
 from __future__ import annotations
@@ -18,8 +16,8 @@ import math
 import numpy as np
 
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.core.sensors.stamp_params import TimestampParams
 from drake_tracker.core.sensors.timestamps import StreamClock, log_reanchor
-from drake_tracker.params.tracker_params import TimestampParams
 
 _log = logging.getLogger(__name__)
 
@@ -40,8 +38,7 @@ class ReadingGate:
     and one warning per run of non-finite values (an encoder gap).
 
     ``admit`` returns the reading's time in the tracker's time base, or None when it is
-    skipped (logged through ``warnings``; ``logger=None`` keeps it quiet, for a second
-    consumer of the same stream that must take the same decisions).
+    skipped (logged through ``warnings``; ``logger=None`` keeps it quiet).
     """
 
     def __init__(self, params: TimestampParams, joint_names: list[str],
@@ -69,42 +66,6 @@ class ReadingGate:
         clone.__dict__.update(self.__dict__)
         clone.clock, clone.warnings = clock, warnings
         return clone
-
-    #: Numbers in :meth:`to_vector`: the last raw stamp, whether in an encoder gap, the
-    #: gap's first stamp, readings skipped in it, whether the latest reading restarted
-    #: the stream; then the clock's (:meth:`StreamClock.to_vector`).
-    _HEAD = 5
-    VECTOR_SIZE = _HEAD + StreamClock.VECTOR_SIZE
-
-    def to_vector(self) -> np.ndarray:
-        """The gate's state as VECTOR_SIZE numbers (its warnings' counts are not kept)."""
-        in_gap = self.gap_start_s is not None
-        head = [self.last_raw_s, float(in_gap), self.gap_start_s if in_gap else math.nan,
-                float(self.gap_readings), float(self.restarted)]
-        return np.concatenate([head, self.clock.to_vector()])
-
-    @staticmethod
-    def last_raw_stamp(vector: np.ndarray) -> float:
-        """The last raw stamp seen by the gate that :meth:`to_vector` wrote as
-        ``vector`` (NaN before any), without reading the rest back."""
-        return float(vector[0])
-
-    @staticmethod
-    def from_vector(vector: np.ndarray, params: TimestampParams,
-                    joint_names: list[str]) -> ReadingGate:
-        """A silent gate (no logger) in the state that :meth:`to_vector` wrote as
-        ``vector``. Raises ValueError for a vector of the wrong size."""
-        x = np.asarray(vector, dtype=float).ravel()
-        if x.shape != (ReadingGate.VECTOR_SIZE,):
-            raise ValueError(f"a reading gate's state has {ReadingGate.VECTOR_SIZE} "
-                             f"numbers, got {x.shape}")
-        gate = ReadingGate(params, joint_names, logger=None)
-        last_raw, in_gap, gap_start, gap_readings, restarted = x[:ReadingGate._HEAD].tolist()
-        gate.last_raw_s = last_raw
-        gate.gap_start_s = gap_start if in_gap else None
-        gate.gap_readings, gate.restarted = int(gap_readings), bool(restarted)
-        gate.clock.restore(x[ReadingGate._HEAD:])
-        return gate
 
     def is_new(self, raw_s: float) -> bool:
         """Whether a stamp held on a port is a new sample (differs from the last seen)."""

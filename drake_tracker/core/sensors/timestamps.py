@@ -35,9 +35,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import numpy as np
-
-from drake_tracker.params.tracker_params import TimestampParams
+from drake_tracker.core.sensors.stamp_params import TimestampParams
 
 if TYPE_CHECKING:
     from drake_tracker.core.filter.belief_buffer import BeliefBuffer
@@ -118,41 +116,6 @@ class StreamClock:
 
     def __deepcopy__(self, memo) -> StreamClock:
         return self.copy()
-
-    #: Numbers in :meth:`to_vector`: 9 scalars (offset, last shift, latest stamp,
-    #: accepted count, the run of rejected stamps: count, first, last; the run of lags:
-    #: count, first), then the recent gaps and the recent lags, each as a count followed
-    #: by RECENT_GAPS slots.
-    VECTOR_SIZE = 9 + 2 * (1 + RECENT_GAPS)
-
-    def to_vector(self) -> np.ndarray:
-        """The clock's state as VECTOR_SIZE numbers (NaN for a latest stamp of None), for
-        a Drake discrete state; :meth:`restore` reads them back."""
-        numbers = [self.offset_s, self.last_shift_s,
-                   math.nan if self.latest_s is None else self.latest_s, self._accepted,
-                   self._run_count, self._run_first_raw, self._run_last_raw,
-                   self._lag_run_count, self._lag_run_first]
-        for history in (self._gaps, self._lags):
-            numbers += [len(history), *history] + [math.nan] * (RECENT_GAPS - len(history))
-        return np.array(numbers, dtype=float)
-
-    def restore(self, vector: np.ndarray) -> None:
-        """Takes the state that :meth:`to_vector` gave ``vector`` (name, parameters and
-        ``max_behind_s`` stay this clock's)."""
-        values = np.asarray(vector, dtype=float).tolist()
-        if len(values) != self.VECTOR_SIZE:
-            raise ValueError(f"a {self.name} clock's state has {self.VECTOR_SIZE} numbers, "
-                             f"got {len(values)}")
-        (self.offset_s, self.last_shift_s, latest, accepted, run_count, self._run_first_raw,
-         self._run_last_raw, lag_run_count, self._lag_run_first) = values[:9]
-        self.latest_s = None if math.isnan(latest) else latest
-        self._accepted, self._run_count = int(accepted), int(run_count)
-        self._lag_run_count = int(lag_run_count)
-        at = 9
-        for history in (self._gaps, self._lags):
-            history.clear()
-            history.extend(values[at + 1:at + 1 + int(values[at])])
-            at += 1 + RECENT_GAPS
 
     @property
     def recent_period_s(self) -> float:

@@ -1,0 +1,82 @@
+"""The parameters as the core receives them: validated once and resolved for one model.
+
+``drake_tracker.params.resolve_tracker_params(params, model)`` builds a
+:class:`ResolvedParams` from the user's ``TrackerParams`` (YAML-shaped, per joint group)
+and a ``TrackerModel``: every joint's noise model as arrays in the model's position
+order, the CPF blocks as index arrays, the joints whose bias may jump. The core reads
+only this object, never the YAML-shaped one, so nothing in the core validates
+parameters again.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drake_tracker.core.cpf.image_params import ImageParams
+from drake_tracker.core.filter.kalman import KalmanBankParams
+from drake_tracker.core.robustness.health import HealthParams
+from drake_tracker.core.sensors.stamp_params import TimestampParams
+
+
+@dataclass(frozen=True)
+class JointArrays:
+    """Each joint's noise model (``JointNoise``) as (n,) arrays, n = the model's joints
+    (virtual camera joints included) in position order.
+
+    ``kalman`` is what the Kalman bank runs (σb is 0 for a joint without bias);
+    ``bias_process_std`` keeps each joint's own σb (rad/√s) for the plausibility of
+    a bias. ``jump_rate_per_s`` is 0 where a joint's bias cannot jump (no bias, or in
+    the camera's kinematic chain unless ``image.bias_jumps_in_camera_chain``).
+    ``initial_mean`` holds ``initial_positions_rad`` (0 elsewhere).
+    """
+
+    names: tuple[str, ...]
+    kalman: KalmanBankParams
+    bias_process_std: np.ndarray
+    bias_decay_per_s: np.ndarray
+    has_bias: np.ndarray
+    jump_rate_per_s: np.ndarray
+    declared_jump_rate_per_s: np.ndarray
+    jump_std: np.ndarray
+    initial_mean: np.ndarray
+    initial_angle_std: np.ndarray
+    initial_bias_std: np.ndarray
+    #: Which joints are the robot's (measured); the others are the virtual camera joints.
+    robot: np.ndarray
+    #: Indices of the robot joints (the encoder readings' order) within ``names``.
+    robot_indices: np.ndarray
+
+
+@dataclass(frozen=True)
+class ResolvedParams:
+    """Everything the core needs besides the model and the camera, checked once."""
+
+    joints: JointArrays
+    #: Index arrays into ``joints.names`` of the CPF's blocks, in sampling order.
+    blocks: tuple[np.ndarray, ...]
+    #: The robot joints that move the camera (e.g. a pan-tilt head), base first.
+    camera_chain: tuple[str, ...]
+    image: ImageParams
+    health: HealthParams
+    timestamps: TimestampParams
+    use_joint_readings: bool
+    estimate_camera_offset: bool
+    buffer_horizon_s: float
+    max_interpolation_gap_s: float
+
+    @property
+    def robot_indices(self) -> np.ndarray:
+        """Indices of the robot (measured) joints within ``joints.names``."""
+        return self.joints.robot_indices
+
+    @property
+    def robot_joint_indices(self) -> np.ndarray:
+        """The same as ``robot_indices`` (the name ``TrackerModel`` uses)."""
+        return self.joints.robot_indices
+
+    @property
+    def num_joints(self) -> int:
+        """Number of joints the tracker estimates (robot and virtual)."""
+        return len(self.joints.names)

@@ -1,0 +1,172 @@
+"""Resolving the tracker's parameters against a model, once: ``TrackerParams`` (per
+joint group, as a YAML file has them) in, the core's ``ResolvedParams`` (per joint, as
+arrays in the model's position order) out."""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from drake_tracker.core.filter.kalman import KalmanBankParams
+from drake_tracker.core.resolved_params import JointArrays, ResolvedParams
+from drake_tracker.params.tracker_params import JointNoise, TrackerParams
+from drake_tracker.params.validation import validate_tracker_params
+from drake_tracker.robot.model import VIRTUAL_JOINT_NAMES
+
+if TYPE_CHECKING:
+    from drake_tracker.robot.model import TrackerModel
+
+
+def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
+                           model: TrackerModel) -> ResolvedParams:
+    """``params`` (None: the defaults) checked (:func:`validate_tracker_params`) and
+    resolved for ``model``'s joints; ValueError naming the field or the unknown joint.
+    A ``ResolvedParams`` is returned as it is."""
+    if isinstance(params, ResolvedParams):
+        if params.joints.names != tuple(model.joint_names):
+            raise ValueError(f"parameters resolved for joints {list(params.joints.names)}, "
+                             f"not this model's {model.joint_names}")
+        return params
+    params = TrackerParams() if params is None else params
+    validate_tracker_params(params)
+    names = list(model.joint_names)
+    chain = camera_chain_joints(model)
+    noise = joint_noise_for(params, names, model.prismatic_joint_names)
+    unknown = sorted(set(params.initial_positions_rad) - set(names))
+    if unknown:
+        raise ValueError(f"initial_positions_rad: unknown joint names {unknown}")
+    mean = np.zeros(len(names))
+    for name, value in params.initial_positions_rad.items():
+        mean[names.index(name)] = value
+
+    def column(field: str) -> np.ndarray:
+        return np.array([getattr(j, field) for j in noise], float)
+
+    has_bias = np.array([j.has_bias for j in noise], bool)
+    jumps = has_bias.copy()
+    if not params.image.bias_jumps_in_camera_chain:
+        jumps &= np.array([name not in chain for name in names])
+    declared_jumps = column("bias_jump_rate_per_s")
+    joints = JointArrays(
+        names=tuple(names),
+        kalman=kalman_params(noise, names),
+        bias_process_std=column("bias_process_std_rad_per_sqrt_s"),
+        bias_decay_per_s=column("bias_decay_per_s"),
+        has_bias=has_bias,
+        jump_rate_per_s=np.where(jumps, declared_jumps, 0.0),
+        declared_jump_rate_per_s=declared_jumps,
+        jump_std=column("bias_jump_std_rad"),
+        initial_mean=mean,
+        initial_angle_std=column("initial_angle_std_rad"),
+        initial_bias_std=column("initial_bias_std_rad"),
+        robot=np.isin(names, model.robot_joint_names),
+        robot_indices=np.array([names.index(n) for n in model.robot_joint_names], int),
+    )
+    return ResolvedParams(
+        joints=joints,
+        blocks=tuple(resolve_blocks(params, names, chain)),
+        camera_chain=tuple(chain),
+        image=params.image,
+        health=params.health,
+        timestamps=params.timestamps,
+        use_joint_readings=bool(params.use_joint_readings),
+        estimate_camera_offset=bool(params.estimate_camera_offset),
+        buffer_horizon_s=float(params.buffer_horizon_s),
+        max_interpolation_gap_s=float(params.max_interpolation_gap_s),
+    )
+
+
+def kalman_params(noise: list[JointNoise], names: list[str]) -> KalmanBankParams:
+    """The bank's per-joint arrays (σb is 0 for a joint without bias)."""
+    has_bias = np.array([j.has_bias for j in noise], bool)
+    return KalmanBankParams(
+        encoder_noise_std=np.array([j.encoder_noise_std_rad for j in noise]),
+        angle_process_std=np.array([j.angle_process_std_rad_per_sqrt_s for j in noise]),
+        bias_process_std=np.where(
+            has_bias, [j.bias_process_std_rad_per_sqrt_s for j in noise], 0.0),
+        bias_decay_per_s=np.array([j.bias_decay_per_s for j in noise]),
+        has_bias=has_bias,
+        names=tuple(names),
+    )
+
+
+def camera_chain_joints(model: TrackerModel) -> list[str]:
+    """The robot joints that move the camera (e.g. a pan-tilt head), base first."""
+    plant = model.plant
+    camera_body = model.nominal_camera_frame.body().index()
+    chain = []
+    for name in model.robot_joint_names:
+        joint = plant.GetJointByName(name)
+        if camera_body in plant.GetBodiesKinematicallyAffectedBy([joint.index()]):
+            chain.append(name)
+    return chain
+
+
+def joint_noise_for(params: TrackerParams, joint_names: list[str],
+                    prismatic: Collection[str] = ()) -> list[JointNoise]:
+    """The JointNoise of each joint: its override, else the virtual joints', the
+    prismatic joints' (``prismatic``: the robot's, ``TrackerModel.prismatic_joint_names``)
+    or the robot joints' default; unknown override names raise ValueError."""
+    unknown = sorted(set(params.kalman.overrides) - set(joint_names))
+    if unknown:
+        raise ValueError(f"kalman.overrides: unknown joint names {unknown}; the model's "
+                         f"joints are {joint_names}")
+    out = []
+    for name in joint_names:
+        if name in params.kalman.overrides:
+            out.append(params.kalman.overrides[name])
+        elif name in VIRTUAL_JOINT_NAMES:
+            out.append(params.kalman.virtual_joints)
+        elif name in prismatic:
+            out.append(params.kalman.prismatic_joints)
+        else:
+            out.append(params.kalman.robot_joints)
+    return out
+
+
+def resolve_blocks(params: TrackerParams, joint_names: list[str],
+                   camera_chain: list[str] = ()) -> list[np.ndarray]:
+    """Index arrays of the CPF blocks. Without ``estimate_camera_offset`` the virtual
+    joints are left out of every block (they stay at their prior, 0).
+
+    ``per-joint`` samples the camera first: the robot joints that move the camera
+    (``camera_chain``, e.g. a pan-tilt head), then the virtual joints, then the other
+    joints from base to tip. Measured on Apollo, sampling the arm before the camera lets
+    the arm's base joints absorb the camera's error, and the estimate drifts.
+    """
+    im = params.image
+    virtual = [n for n in joint_names if n in VIRTUAL_JOINT_NAMES]
+    robot = [n for n in joint_names if n not in VIRTUAL_JOINT_NAMES]
+    if im.blocks == "per-joint":
+        chain = [n for n in robot if n in camera_chain]
+        rest = [n for n in robot if n not in camera_chain]
+        groups = [[n] for n in chain] + [[n] for n in virtual] + [[n] for n in rest]
+    elif im.blocks == "arm-camera":
+        groups = [robot, virtual]
+    elif im.blocks == "single":
+        groups = [robot + virtual]
+    elif im.blocks == "camera":
+        groups = [[n] for n in virtual]
+    else:
+        groups = [list(b) for b in im.block_joints]
+        for block in groups:
+            for name in block:
+                if name not in joint_names:
+                    raise ValueError(f"image.block_joints: unknown joint '{name}'; the "
+                                     f"model's joints are {joint_names}")
+    if not params.estimate_camera_offset:
+        groups = [[n for n in b if n not in VIRTUAL_JOINT_NAMES] for b in groups]
+    groups = [b for b in groups if b]
+    return [np.array([joint_names.index(n) for n in b], int) for b in groups]
+
+
+def resolve_kalman_params(params: TrackerParams, joint_names: list[str],
+                          prismatic: Collection[str] = ()) -> KalmanBankParams:
+    """The Kalman bank's per-joint arrays for ``joint_names`` alone (no model: e.g. a
+    bank of named joints in a test or a benchmark); ``prismatic`` as in
+    :func:`joint_noise_for`. The bank checks the arrays; ``params`` are not checked
+    again (``resolve_tracker_params`` does, for a model)."""
+    return kalman_params(joint_noise_for(params, list(joint_names), prismatic),
+                         list(joint_names))

@@ -1,0 +1,172 @@
+"""One property over every mechanism of the per-image step: the offline ``Tracker`` and
+the Diagram (``AddTracker``) give the same estimates from the same data, bit for bit
+(1e-9) wherever no image is in flight, and apply the same images.
+
+Each case forces one mechanism: plain tracking on two robots, the update on the worker
+thread, the time-stamp policy (a glitch, a clock step, a counter restart, an image out
+of order; a NaN burst; a glitched first stamp; a clock step of both streams; an
+encoder clock step forward), a restart, a second opinion, a
+challenger, and images that show no arm."""
+
+import logging
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pytest
+from fast_params import small_params
+from offline_vs_diagram import H, assert_same_when_settled, feed, simulate
+
+from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.robot.model import build_tracker_model, robot_preset
+from drake_tracker.tracker import Tracker
+
+
+@dataclass
+class Case:
+    """A run, its parameters and faults, and what the offline tracker must show."""
+
+    robot: str = "apollo"
+    duration_s: float = 0.5
+    seed: int = 7
+    bias_deg: float = 3.0
+    #: (run, params) -> (run, stamps, sequences) with the faults applied.
+    faults: object = None
+    tune: object = None
+    latency_s: float = 0.0
+    #: Compare from this reading on (before it the estimates differ by design).
+    first: int = 0
+    #: Logged by the offline tracker, or by the Diagram.
+    offline_log: tuple = ()
+    diagram_log: tuple = ()
+    min_restarts: int = 0
+    all_applied: bool = False
+    some_skipped: bool = False
+    extra: dict = field(default_factory=dict)
+
+
+def _plain(p):
+    p.image.num_particles, p.image.seed = 40, 4
+
+
+def _latency(p):
+    _plain(p)
+    p.image.update_latency_s = 0.01  # shorter than the 33 ms between images
+
+
+def _stamp_faults(run):
+    stamps = run.reading_times_s.copy()
+    stamps[20] += 1000.0  # a glitch
+    stamps[60:] -= 1.0  # the encoders' clock steps back
+    sequences = np.arange(len(run.image_capture_times_s))
+    sequences[8:] -= 8  # the camera's counter restarts at image 8
+    arrivals = run.image_arrival_times_s.copy()
+    arrivals[4] = arrivals[5] + 2 * H  # image 4 arrives after image 5
+    return replace(run, image_arrival_times_s=arrivals), stamps, sequences
+
+
+def _nan_burst(run):
+    burst = run.readings_rad.copy()
+    burst[(run.reading_times_s >= 0.15) & (run.reading_times_s < 0.3), 1] = np.nan
+    return replace(run, readings_rad=burst), None, None
+
+
+def _glitched_first_stamp(run):
+    stamps = run.reading_times_s.copy()
+    stamps[0] = 1e6
+    return run, stamps, None
+
+
+def _shared_clock_step(run):
+    stamps = run.reading_times_s - 1.0 * (run.reading_times_s >= 0.2)
+    captures = run.image_capture_times_s - 1.0 * (run.image_capture_times_s >= 0.2)
+    return replace(run, image_capture_times_s=captures), stamps, None
+
+
+def _encoder_step_forward(run):
+    return run, run.reading_times_s + 0.2 * (run.reading_times_s >= 0.22), None
+
+
+def _no_arm(run):
+    images = run.depth_images_m.copy()
+    gone = (run.image_capture_times_s >= 0.9) & (run.image_capture_times_s < 1.2)
+    noise = np.random.default_rng(11).normal(0.0, 0.002, images[gone].shape)
+    images[gone] = (2.5 + noise).astype(images.dtype)
+    return replace(run, depth_images_m=images), None, None
+
+
+def _restart(p):
+    p.health.misplaced_fraction, p.health.restart_after_misplaced_s = 0.99, 0.0
+
+
+def _second_opinion(p):
+    p.health.second_opinion_agreement, p.health.second_opinion_margin_nats = 1.0, 0.0
+    p.image.num_particles = 5
+
+
+def _challenger(p):
+    p.health.second_opinion_agreement = 0.0
+    p.health.challenger_bias_sigmas, p.health.second_opinion_margin_nats = 0.01, 0.0
+    p.image.num_particles = 5
+
+
+CASES = {
+    "plain": Case(duration_s=0.6, seed=4, tune=_plain),
+    "another robot": Case(robot="arm6", duration_s=0.6, seed=4, tune=_plain),
+    "update on the worker thread": Case(duration_s=0.6, seed=4, tune=_latency,
+                                        latency_s=0.01),
+    "glitch, clock step, counter restart, out of order": Case(
+        faults=_stamp_faults, all_applied=True,
+        diagram_log=("restarted", "far in the future", "re-anchored")),
+    "NaN burst": Case(faults=_nan_burst, some_skipped=True,
+                      diagram_log=("not finite", "gap of the joint readings")),
+    "glitched first stamp": Case(faults=_glitched_first_stamp, first=10,
+                                 offline_log=("restarted at",)),
+    "a clock step of both streams": Case(faults=_shared_clock_step, some_skipped=True,
+                                         offline_log=("re-aligned",)),
+    "an encoder clock step forward": Case(faults=_encoder_step_forward, some_skipped=True,
+                                          offline_log=("in a gap of the readings at the "
+                                                       "same lag",)),
+    "restart": Case(bias_deg=4.0, tune=_restart, min_restarts=1),
+    "second opinion": Case(bias_deg=0.5, tune=_second_opinion, min_restarts=1,
+                           offline_log=("search from the encoders' arm explains it better",)),
+    "challenger": Case(bias_deg=0.5, tune=_challenger, min_restarts=1,
+                       offline_log=("a challenger searched from the encoders' arm",)),
+    "images without the arm": Case(duration_s=1.6, seed=3, bias_deg=2.0, faults=_no_arm,
+                                   some_skipped=True, offline_log=("no arm where one must be",)),
+}
+
+
+@pytest.fixture(scope="module")
+def arm6():
+    return build_tracker_model(robot_preset("arm6"))
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_offline_tracker_and_diagram_give_the_same_estimates(name, request, caplog):
+    case = CASES[name]
+    model = request.getfixturevalue(case.robot)
+    run = synthetic_run(model, duration_s=case.duration_s, encoder_rate_hz=1.0 / H,
+                        seed=case.seed, bias_rad=np.radians(case.bias_deg))
+    p = small_params()
+    if case.tune is not None:
+        case.tune(p)
+    run, stamps, sequences = case.faults(run) if case.faults else (run, None, None)
+    tracker = Tracker(model, run.camera_intrinsics, p)
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        offline, applied = feed(tracker, run, stamps=stamps, sequences=sequences)
+    for message in case.offline_log:
+        assert message in caplog.text, message
+    assert tracker.health.restarts >= case.min_restarts
+    assert sum(applied.values()) > 5  # the images did their work
+    if case.all_applied:
+        assert all(applied.values())
+    if case.some_skipped:
+        assert not all(applied.values())
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        diagram, images_applied = simulate(model, run, p, stamps, sequences)
+    for message in case.diagram_log:
+        assert message in caplog.text, message
+    assert images_applied == sum(applied.values())
+    assert_same_when_settled(run, diagram, offline, case.first, case.latency_s)
