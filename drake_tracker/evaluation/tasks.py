@@ -33,10 +33,13 @@ if TYPE_CHECKING:
 #: The quick suite: each kind of sequence (sinusoid, free, fast, out of view, occlusion)
 #: with each bias variant, shortened.
 QUICK_SEQUENCES = ("s-full-arm", "s-head-arm", "arm++", "in-out-in", "occlusion")
-#: Further quick cases (sequence, bias): heavy and lasting occlusion, a bias ramp, and a
-#: world robot that is not exactly the tracker's model.
+#: Further quick cases (sequence, bias): heavy and lasting occlusion, a bias ramp, a
+#: world robot that is not exactly the tracker's model, and biases that drift as random
+#: walks of 1, 3 and 6 deg/sqrt(s).
 QUICK_EXTRA_CASES = (("occlusion-heavy", "constant"), ("occlusion-lasting", "constant"),
-                     ("s-full-arm", "ramp"), ("s-full-arm-mismatch", "constant"))
+                     ("s-full-arm", "ramp"), ("s-full-arm-mismatch", "constant"),
+                     ("s-full-arm", "random-walk-1"), ("s-full-arm", "random-walk-3"),
+                     ("s-full-arm", "random-walk-6"))
 QUICK_DURATION_S = 10.0
 QUICK_IMAGE_INTERVAL_S = 0.1
 #: Seeds per case by default (each seed varies the simulation and the tracker).

@@ -1,8 +1,11 @@
 """Named scenario presets, ``SEQUENCE/BIAS``, after the paper's experiments.
 
 BIAS is ``none``, ``constant`` (8.6 deg on every arm joint), ``time-varying`` (smooth
-steps of alternating sign, 5 deg amplitude, so jumps reach 10 deg) or ``ramp`` (0 to
-8.6 deg linearly over the first 10 s on every arm joint, then held). Sequences, all on
+steps of alternating sign, 5 deg amplitude, so jumps reach 10 deg), ``ramp`` (0 to
+8.6 deg linearly over the first 10 s on every arm joint, then held) or
+``random-walk-R`` (R = 1, 3, 6: every arm joint's bias drifts from 0 as an independent
+random walk of R deg/sqrt(s), seeded by the scenario: the default filter's bias model
+is 1.15 deg/sqrt(s)). Sequences, all on
 Apollo:
 
 * 30 s sinusoids: ``s-lower-arm`` (elbow and wrist), ``s-upper-arm`` (shoulder),
@@ -39,7 +42,9 @@ EXTRA_SEQUENCES = ("occlusion-heavy", "occlusion-lasting", "s-full-arm" + MISMAT
 #: Every listed sequence (any of BASE_SEQUENCES + MISMATCH_SUFFIX is accepted too).
 ALL_SEQUENCES = SEQUENCES + EXTRA_SEQUENCES
 BASE_SEQUENCES = SEQUENCES + ("occlusion-heavy", "occlusion-lasting")
-BIAS_VARIANTS = ("none", "constant", "time-varying", "ramp")
+#: The random walks' rates (deg/sqrt(s)): the bias presets ``random-walk-R``.
+RANDOM_WALK_RATES = {"random-walk-1": 1.0, "random-walk-3": 3.0, "random-walk-6": 6.0}
+BIAS_VARIANTS = ("none", "constant", "time-varying", "ramp", *RANDOM_WALK_RATES)
 #: When the occlusion-heavy/-lasting box enters and (heavy) leaves, as run fractions.
 HEAVY_OCCLUSION_WINDOW = (0.25, 0.75)
 
@@ -100,8 +105,12 @@ def _preset(sequence: str, bias: str) -> Scenario:
     if base != sequence:
         s.model_mismatch = dataclasses.replace(MISMATCH)
     e = s.encoders
-    e.bias = {"none": "none", "constant": "constant", "time-varying": "steps",
-              "ramp": "ramp"}[bias]
+    if bias in RANDOM_WALK_RATES:
+        e.bias = "random-walk"
+        e.random_walk_sigma_deg_per_sqrt_s = RANDOM_WALK_RATES[bias]
+    else:
+        e.bias = {"none": "none", "constant": "constant", "time-varying": "steps",
+                  "ramp": "ramp"}[bias]
     return s
 
 
