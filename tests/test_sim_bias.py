@@ -128,3 +128,26 @@ def test_a_time_independent_bias_computed_once_equals_the_formula(bias):
         np.testing.assert_array_equal(fixed, model._deterministic(t))
         fixed[:] = 99.0  # a copy: the next sample is not affected
         assert not np.array_equal(model.deterministic(t), fixed)
+
+
+@pytest.mark.parametrize("rate", [1, 3, 6])
+def test_random_walk_presets_drift_at_their_rate(rate):
+    """``s-full-arm/random-walk-R``: every arm joint's bias a random walk of R deg/sqrt(s)
+    from 0; over 300 seeds of one joint after 1 s, variance R^2 (std. error about 8 %)."""
+    s = load_scenario(f"s-full-arm/random-walk-{rate}")
+    assert (s.encoders.bias, s.encoders.random_walk_sigma_deg_per_sqrt_s) == (
+        "random-walk", float(rate))
+    names = ["j0", "j1"]
+    model = JointBiasModel(s.encoders, names, ["j1"])
+    finals = []
+    for seed in range(300):
+        bias, previous_t = np.zeros(2), None
+        for k in range(11):
+            t = 0.1 * k
+            bias = model.next(bias, t, None if previous_t is None else t - previous_t,
+                              sample_normals(seed, k, 4)[2:])
+            previous_t = t
+        finals.append(np.degrees(bias))
+    finals = np.array(finals)
+    assert np.all(finals[:, 0] == 0.0)  # an unbiased joint stays at 0
+    assert finals[:, 1].var(ddof=1) == pytest.approx(rate ** 2, rel=0.3)
