@@ -205,7 +205,8 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     settle_s = 0.5
     summary = evaluate([task], tmp_path, settle_s=settle_s, progress=False)
     for name in ("errors.csv", "summary.csv", "summary.txt", "boxplot_s-full-arm.png",
-                 "paper_comparison.md", "timeseries_s-full-arm_constant.png",
+                 "paper_comparison.md", "health_confusion.md",
+                 "timeseries_s-full-arm_constant.png",
                  f"runs/{task.name}.npz", f"results/{task.name}.csv.gz",
                  f"results/{task.name}.json", "protocol.json", "failures.json"):
         assert (tmp_path / name).stat().st_size > 0, name
@@ -213,6 +214,10 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
         rows = list(csv.DictReader(f))
     assert {r["method"] for r in rows} == {"encoders_only", "full_fusion"}
     assert min(float(r["time_s"]) for r in rows) < settle_s  # every sample is kept
+    # The tracker's health at each sample; none for the encoders alone.
+    assert {r["health"] for r in rows if r["method"] == "encoders_only"} == {""}
+    states = {r["health"] for r in rows if r["method"] == "full_fusion"}
+    assert states <= {"", "tracking", "uncertain", "lost"} and "tracking" in states
     with (tmp_path / "summary.csv").open() as f:
         written = list(csv.DictReader(f))
     assert len(written) == len(summary) == 2 * 2

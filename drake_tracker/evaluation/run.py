@@ -15,6 +15,10 @@ from typing import TYPE_CHECKING
 
 from drake_tracker.evaluation.executor_choice import make_executor
 from drake_tracker.evaluation.executors import Executor, SerialExecutor
+from drake_tracker.evaluation.health_calibration import (
+    format_health_confusion,
+    health_confusion,
+)
 from drake_tracker.evaluation.methods import METHODS
 from drake_tracker.evaluation.paper_comparison import format_paper_comparison, paper_comparison
 from drake_tracker.evaluation.plots import plot_results
@@ -84,7 +88,8 @@ def run_tasks(executor: Executor, function: Callable, tasks: list[Task],
 def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
              settle_s: float = SETTLE_S, progress: bool = True) -> list[dict]:
     """Runs the tasks not done yet in ``out_dir`` and writes errors.csv, the summary
-    (summary.csv, summary.txt), paper_comparison.md, failures.json and the figures
+    (summary.csv, summary.txt), paper_comparison.md, health_confusion.md (the health
+    state against the error: ``health_calibration.py``), failures.json and the figures
     there; returns the summary rows."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -114,6 +119,10 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
     text = write_summary(summary, out_dir, failures)
     (out_dir / "paper_comparison.md").write_text(
         format_paper_comparison(paper_comparison(summary)) + "\n")
+    health = format_health_confusion(health_confusion(rows, settle_s))
+    (out_dir / "health_confusion.md").write_text(
+        f"# The health state against the hand's error, from {settle_s:g} s on\n\n"
+        + health + "\n")
     if rows:
         first_seed = {}
         for t in tasks:
@@ -124,6 +133,7 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
                      {key: t.scenario() for key, t in first_seed.items()})
     if progress:
         print(text)
+        print(health)
         print(cost_line(metas, time.perf_counter() - start, len(todo)))
         print(f"wrote {out_dir}/summary.csv (errors from t = {settle_s:g} s on), errors.csv, "
               f"protocol.json and figures")

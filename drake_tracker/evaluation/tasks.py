@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.core.robustness.health import HealthState
 from drake_tracker.evaluation.methods import method_params
 from drake_tracker.metrics import pose_errors
 
@@ -54,7 +55,7 @@ SAMPLE_PERIOD_S = 0.05
 SETTLE_S = 5.0
 #: Columns of a task's result CSV (and of errors.csv).
 ERROR_COLUMNS = ("sequence", "bias", "method", "seed", "time_s", "translation_mm",
-                 "rotation_deg")
+                 "rotation_deg", "health")
 
 #: ``report(message)``: a task's progress inside its run, e.g. "simulating 3/10 s".
 Reporter = Callable[[str], None]
@@ -179,19 +180,22 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
         if report:
             report(f"{method} ({k}/{len(methods)})")
         start = time.perf_counter()
+        health = np.full(len(times), -1, int)
         if method == "encoders_only":
             X = encoders_only_X_CE(run, model)[truth_index]
         else:
             params = protocol_params(run, method, min_image_interval_s, base_params,
                                      tracker_seed)
-            X = replay_run(run, params, model, sample_times_s=times).X_CE
+            replay = replay_run(run, params, model, sample_times_s=times)
+            X, health = replay.X_CE, replay.health
         if wall_s is not None:
             wall_s[method] = time.perf_counter() - start
         ok = np.all(np.isfinite(X.reshape(len(X), -1)), axis=1)
         t_err = np.full(len(times), np.nan)
         r_err = np.full(len(times), np.nan)
         t_err[ok], r_err[ok] = pose_errors(X[ok], X_true[ok])
-        out[method] = {"times_s": times, "translation_mm": t_err, "rotation_deg": r_err}
+        out[method] = {"times_s": times, "translation_mm": t_err, "rotation_deg": r_err,
+                       "health": health}
     return out
 
 
@@ -201,9 +205,12 @@ def errors_csv_text(task: Task, errors: dict[str, dict[str, np.ndarray]]) -> str
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(ERROR_COLUMNS)
     for method, e in errors.items():
-        for t, tr, rot in zip(e["times_s"], e["translation_mm"], e["rotation_deg"]):
+        health = e.get("health", np.full(len(e["times_s"]), -1))
+        for t, tr, rot, h in zip(e["times_s"], e["translation_mm"], e["rotation_deg"],
+                                 health, strict=True):
+            state = HealthState(int(h)).name.lower() if h >= 0 else ""
             writer.writerow([task.sequence, task.bias, method, task.seed, f"{t:.4f}",
-                             f"{tr:.4f}", f"{rot:.5f}"])
+                             f"{tr:.4f}", f"{rot:.5f}", state])
     return buffer.getvalue()
 
 

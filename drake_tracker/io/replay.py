@@ -59,6 +59,9 @@ class ReplayResult:
     num_images_skipped: int
     image_update_s: list[float]
     wall_time_s: float
+    #: (T,) the health state reported at each sample (``HealthState`` value; -1 before
+    #: the tracker started).
+    health: np.ndarray | None = None
 
 
 def robot_config_from_yaml(text: str) -> RobotConfig:
@@ -92,6 +95,7 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
     out_var = np.full((len(times), n), np.nan)
     out_b = np.full((len(times), n), np.nan)
     out_X = np.full((len(times), 4, 4), np.nan)
+    out_health = np.full(len(times), -1, int)
     image_order = np.argsort(run.image_arrival_times_s, kind="stable")
     next_image = 0
     next_sample = 0
@@ -107,6 +111,7 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
                 e = tracker.estimate()
                 out_q[next_sample], out_var[next_sample] = e.positions, e.position_variances
                 out_b[next_sample], out_X[next_sample] = e.biases, e.X_CE
+                out_health[next_sample] = int(e.health.state)
             next_sample += 1
 
     for k, t in enumerate(run.reading_times_s):
@@ -135,7 +140,8 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
     virtual = model.virtual_joint_indices
     return ReplayResult(
         times_s=np.asarray(times), positions=out_q, position_variances=out_var, biases=out_b,
-        camera_offsets=out_q[:, virtual], X_CE=out_X, joint_names=list(model.joint_names),
+        camera_offsets=out_q[:, virtual], X_CE=out_X, health=out_health,
+        joint_names=list(model.joint_names),
         num_images_applied=tracker.num_images_applied,
         num_images_skipped=tracker.num_images_skipped + skipped_images,
         image_update_s=list(tracker.images.update.times.per_update) if tracker.images else [],

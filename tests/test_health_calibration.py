@@ -1,0 +1,64 @@
+"""The health confusion table against counts made by hand, and a replay's health states
+against the tracker's own, sample by sample."""
+
+import math
+
+import numpy as np
+import pytest
+
+from drake_tracker.core.robustness.health import HealthState
+from drake_tracker.evaluation.health_calibration import (
+    band,
+    format_health_confusion,
+    health_confusion,
+)
+from drake_tracker.io.replay import replay_run
+from drake_tracker.io.synthetic import synthetic_run
+
+
+def _row(state, error, time_s=6.0, method="full_fusion"):
+    return {"method": method, "health": state, "translation_mm": str(error),
+            "time_s": str(time_s)}
+
+
+def test_bands_are_closed_above():
+    assert [band(e) for e in (0.0, 10.0, 10.01, 50.0, 50.5, math.inf)] == [
+        "<= 10 mm", "<= 10 mm", "10-50 mm", "10-50 mm", "> 50 mm", "> 50 mm"]
+
+
+def test_the_confusion_table_counts_states_by_error_band():
+    rows = ([_row("tracking", 2.0)] * 97 + [_row("tracking", 20.0)] * 2
+            + [_row("tracking", 80.0)] + [_row("uncertain", 80.0)] * 3
+            + [_row("lost", 300.0)] * 6
+            + [_row("tracking", 500.0, time_s=1.0)]  # before the settling time
+            + [_row("", 200.0, method="encoders_only")]  # no state
+            + [_row("tracking", float("nan"))])  # no error
+    table = health_confusion(rows, settle_s=5.0)
+    assert set(table) == {"full_fusion"}
+    t = table["full_fusion"]
+    assert t["samples"] == 109
+    assert t["counts"] == {("tracking", "<= 10 mm"): 97, ("tracking", "10-50 mm"): 2,
+                           ("tracking", "> 50 mm"): 1, ("uncertain", "> 50 mm"): 3,
+                           ("lost", "> 50 mm"): 6}
+    assert t["tracking_within_10mm"] == pytest.approx(97 / 100)
+    assert t["tracking_when_over_50mm"] == pytest.approx(1 / 10)
+    text = format_health_confusion(table)
+    assert "| tracking | 97 | 2 | 1 |" in text and "97.00 %" in text and "10.00 %" in text
+
+
+def test_a_replay_reports_the_trackers_health_at_each_sample(apollo):
+    run = synthetic_run(apollo, duration_s=0.8, encoder_rate_hz=200.0, seed=2)
+    seen = {}
+
+    def on_image(tracker, frame):
+        seen[frame.arrival_time_s] = int(tracker.health.state)
+
+    times = np.sort(np.concatenate([run.image_arrival_times_s + 1e-6,
+                                    [run.reading_times_s[0] - 0.01]]))
+    result = replay_run(run, None, apollo, sample_times_s=times, on_image=on_image)
+    assert result.health[0] == -1  # before the first reading
+    for k, t in enumerate(times[1:], 1):  # just after each image: its state
+        arrival = t - 1e-6
+        if arrival in seen:
+            assert result.health[k] == seen[arrival]
+    assert int(HealthState.TRACKING) in set(result.health.tolist())
