@@ -94,7 +94,7 @@ def main() -> int:
         t = min(t + args.sample_every_s, args.duration_s)
         simulator.AdvanceTo(t)
         gc.collect()
-        X = tracker.port("X_CE").Eval(bank_context).GetAsMatrix4()
+        X = tracker.X_CE.Eval(bank_context).GetAsMatrix4()
         error = pose_errors(X, truth_port.Eval(truth_context).GetAsMatrix4())[0][0]
         samples.append((t, rss_mb(), error))
         print(f"{t:7.1f} {samples[-1][1]:8.1f} {error:9.1f} "

@@ -281,7 +281,7 @@ def diagram_outcome(bench, stamps=None, sequences=None, arrivals=None, readings=
     errors = []
     for t in np.arange(DIAGRAM_JUDGED_FROM_S, DIAGRAM_END_S + 1e-9, 0.01):
         simulator.AdvanceTo(t)
-        X_CE = tracker.port("X_CE").Eval(tracker.kalman_bank.GetMyContextFromRoot(context))
+        X_CE = tracker.X_CE.Eval(tracker.kalman_bank.GetMyContextFromRoot(context))
         truth = run.truth_X_CE[np.searchsorted(run.truth_times_s, t - 1e-9)]
         errors.append(pose_errors(X_CE.GetAsMatrix4(), truth)[0][0])
     cpf = tracker.image_update.GetMyContextFromRoot(context).get_abstract_state(0)

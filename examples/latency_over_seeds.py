@@ -40,7 +40,7 @@ def run_one(seed: int, latency_s: float, duration_s: float) -> tuple[list[float]
                              measurement_time=world.port("measurement_time"),
                              depth=world.port("depth_frame"),
                              encoder_period_s=world.encoder_period_s)
-        return {"X_CE": tracker.port("X_CE")}
+        return {"X_CE": tracker.X_CE}
 
     run = simulate_and_record(scenario, duration_s=duration_s,
                               image_stride=scenario.camera.render_stride,

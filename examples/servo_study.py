@@ -60,17 +60,17 @@ def build(config: ServoStudyConfig, feedback: str, scenario, params: TrackerPara
                              measurement_time=world.ports["measurement_time"],
                              depth=world.ports["depth_frame"],
                              encoder_period_s=world.encoder_period_s)
-        X_CE = tracker.port("X_CE")
+        X_CE = tracker.X_CE
         # Its joint estimate covers the six virtual camera joints too: keep the robot's.
         select = np.array([[1.0 if name == robot_name else 0.0
                             for name in world.model.joint_names]
                            for robot_name in world.robot_joint_names])
         robot_joints = builder.AddSystem(MatrixGain(select))
-        builder.Connect(tracker.port("estimated_position"), robot_joints.get_input_port())
+        builder.Connect(tracker.estimated_position, robot_joints.get_input_port())
         joints = robot_joints.get_output_port()
         # The tracker's health: the controller holds the arm while it is LOST.
         usable = builder.AddSystem(HealthToUsable())
-        builder.Connect(tracker.port("health"), usable.get_input_port(0))
+        builder.Connect(tracker.health, usable.get_input_port(0))
     else:  # (c) the ideal
         X_CE, joints = world.ports["true_X_CE"], world.ports["true_position"]
     controller = builder.AddSystem(CameraFrameServo(

@@ -185,7 +185,7 @@ def hand_errors_mm(demo: TrackingDemo, times_s: np.ndarray) -> dict[str, np.ndar
     errors: dict[str, list[float]] = {"tracker": [], "encoders_only": []}
     for t in times_s:
         simulator.AdvanceTo(float(t))
-        X_CE = demo.tracker.port("X_CE").Eval(
+        X_CE = demo.tracker.X_CE.Eval(
             demo.tracker.kalman_bank.GetMyContextFromRoot(context)).GetAsMatrix4()
         readings = demo.encoders.GetOutputPort("measured_position").Eval(
             demo.encoders.GetMyContextFromRoot(context))

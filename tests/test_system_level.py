@@ -24,8 +24,8 @@ def simulated():
                              measurement_time=world.port("measurement_time"),
                              depth=world.port("depth_frame"),
                              encoder_period_s=world.encoder_period_s)
-        return {"X_CE": tracker.port("X_CE"),
-                "estimated_position": tracker.port("estimated_position")}
+        return {"X_CE": tracker.X_CE,
+                "estimated_position": tracker.estimated_position}
 
     run = simulate_and_record(scenario, add_systems=add_tracker)
     return run, params

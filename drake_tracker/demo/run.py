@@ -151,12 +151,12 @@ def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
                       "encoders_only", ENCODERS_RGBA, camera_pose=true_camera.get_output_port(),
                       publish_period_s=period)
         AddGhostRobot(builder, world.robot_config, meshcat,
-                      tracker.port("estimated_position"), "estimate", ESTIMATE_RGBA,
+                      tracker.estimated_position, "estimate", ESTIMATE_RGBA,
                       camera_pose=true_camera.get_output_port(), publish_period_s=period)
         full_camera = camera_intrinsics(world.scenario.camera)
         for name, pose, rgba in (("true_camera", true_camera.get_output_port(),
                                   TRUE_CAMERA_RGBA),
-                                 ("estimated_camera", tracker.port("X_WC"), ESTIMATE_RGBA)):
+                                 ("estimated_camera", tracker.X_WC, ESTIMATE_RGBA)):
             frustum = builder.AddNamedSystem(
                 f"{name}_frustum",
                 CameraFrustumVisualizer(meshcat, name, full_camera, rgba,
@@ -175,7 +175,7 @@ def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
                         world.reference.positions(0.0))
         meshcat.StartRecording(frames_per_second=30.0)
         hook.image_update = tracker.image_update  # its deadline_waits, for the report
-        return {"full_fusion_X_CE": tracker.port("X_CE")}
+        return {"full_fusion_X_CE": tracker.X_CE}
 
     return hook
 

@@ -71,7 +71,7 @@ class EncoderKinematicsPose(LeafSystem):
 
 class HealthToUsable(LeafSystem):
     """1 while the tracker's health is not ``LOST``, else 0: whether a controller may act
-    on its estimate (``TrackerSystems.port("health")``'s advice).
+    on its estimate (``TrackerSystems.health``'s advice).
 
     .. pydrake_system::
 
@@ -132,8 +132,8 @@ def AddFeedback(builder: DiagramBuilder, world: ServoWorld, feedback: str,
     for row, name in enumerate(world.robot_joint_names):
         select[row, names.index(name)] = 1.0
     robot_joints = builder.AddNamedSystem("tracker_robot_joints", MatrixGain(select))
-    builder.Connect(tracker.port("estimated_position"), robot_joints.get_input_port())
+    builder.Connect(tracker.estimated_position, robot_joints.get_input_port())
     usable = builder.AddNamedSystem("tracker_health_to_usable", HealthToUsable())
-    builder.Connect(tracker.port("health"), usable.get_input_port(0))
-    return Feedback(tracker.port("X_CE"), robot_joints.get_output_port(),
+    builder.Connect(tracker.health, usable.get_input_port(0))
+    return Feedback(tracker.X_CE, robot_joints.get_output_port(),
                     usable.GetOutputPort("usable"), tracker)
