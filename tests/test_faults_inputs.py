@@ -130,3 +130,32 @@ def test_an_absurd_reading_is_skipped_like_a_non_finite_one(apollo, run, caplog)
         tracker.add_reading("x", run.readings_rad[0])
     with pytest.raises(ValueError, match="not numeric"):
         tracker.add_reading(1.0, ["a"] * len(run.joint_names))
+
+
+def test_images_without_an_arrival_time_are_skipped_warned_and_counted(apollo, run, caplog):
+    """Issue 44's probe: NaN arrival stamps passed the format check and replay_run applied
+    fewer images with no warning, counting none as skipped. Now each is warned about and
+    counted, offline and by the Diagram's source, and the other images are all played."""
+    from dataclasses import replace
+
+    from drake_tracker.io.replay import replay_run
+    from drake_tracker.systems.recorded_run_source import RecordedRunSource
+
+    arrivals = run.image_arrival_times_s.copy()
+    lost = [2, 5, 6]
+    arrivals[lost] = np.nan
+    faulty = replace(run, image_arrival_times_s=arrivals)
+    p = TrackerParams()
+    p.image.num_particles, p.image.min_image_interval_s = 20, 0.0
+    clean = replay_run(run, p, apollo)
+    with caplog.at_level("WARNING"):
+        result = replay_run(faulty, p, apollo)
+    text = caplog.text
+    # Rate-limited: the first of the kind is logged (then the 10th, 100th, ...).
+    assert "image 2 skipped: its arrival stamp is nan, not a time" in text
+    assert result.num_images_skipped == clean.num_images_skipped + len(lost)
+    assert result.num_images_applied + result.num_images_skipped == len(arrivals)
+    caplog.clear()
+    with caplog.at_level("WARNING"):
+        source = RecordedRunSource(faulty)
+    assert source.num_unplayable_images == len(lost) and "[2, 5, 6]" in caplog.text

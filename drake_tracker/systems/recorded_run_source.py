@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.io.recording import RecordedRun
+
+log = logging.getLogger(__name__)
 
 
 class RecordedRunSource(LeafSystem):
@@ -30,8 +34,17 @@ class RecordedRunSource(LeafSystem):
     def __init__(self, run: RecordedRun):
         super().__init__()
         self._run = run
-        self._arrival_order = np.argsort(run.image_arrival_times_s, kind="stable")
-        self._arrivals = run.image_arrival_times_s[self._arrival_order]
+        arrivals = np.asarray(run.image_arrival_times_s, float)
+        order = np.argsort(arrivals, kind="stable")
+        playable = np.isfinite(arrivals[order])
+        #: Images whose arrival stamp is not a time: never shown (warned about here).
+        self.num_unplayable_images = int((~playable).sum())
+        if self.num_unplayable_images:
+            log.warning("%d image(s) of the run have no finite arrival stamp and are never "
+                        "shown (images %s)", self.num_unplayable_images,
+                        order[~playable][:10].tolist())
+        self._arrival_order = order[playable]
+        self._arrivals = arrivals[self._arrival_order]
         n = len(run.joint_names)
         self.DeclareVectorOutputPort("measured_position", n, self._calc_position,
                                      {self.time_ticket()})
