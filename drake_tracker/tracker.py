@@ -101,7 +101,7 @@ class Tracker:
             reading = np.asarray(robot_reading, float)
         except (TypeError, ValueError) as err:
             raise ValueError(f"joint reading stamped {t} s is not numeric: {err}") from err
-        n = len(self.params.robot_indices)
+        n = len(self.params.robot_joint_indices)
         if reading.shape != (n,):
             raise ValueError(f"joint reading has shape {reading.shape}, expected "
                              f"({n},) for joints {self.model.robot_joint_names}")

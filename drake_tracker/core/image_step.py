@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     from drake_tracker.core.image_processor import ImageOutcome
     from drake_tracker.core.resolved_params import ResolvedParams
 
+
 def judge_stamp(frame: DepthFrame, clock: StreamClock, buffer: BeliefBuffer,
                 readings_clock: StreamClock, params: ResolvedParams, log: logging.Logger,
                 images_keep_time: bool = False) -> StampDecision:

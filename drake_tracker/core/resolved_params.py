@@ -67,13 +67,9 @@ class ResolvedParams:
     max_interpolation_gap_s: float
 
     @property
-    def robot_indices(self) -> np.ndarray:
-        """Indices of the robot (measured) joints within ``joints.names``."""
-        return self.joints.robot_indices
-
-    @property
     def robot_joint_indices(self) -> np.ndarray:
-        """The same as ``robot_indices`` (the name ``TrackerModel`` uses)."""
+        """Indices of the robot (measured) joints within ``joints.names`` (the name
+        ``TrackerModel`` uses)."""
         return self.joints.robot_indices
 
     @property

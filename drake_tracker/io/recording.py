@@ -98,6 +98,15 @@ class RecordedRun:
             if getattr(self, name).shape != shape:
                 raise ValueError(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
 
+    def images_in_arrival_order(self) -> tuple[np.ndarray, np.ndarray]:
+        """(indices of the images whose arrival stamp is a finite time, in arrival order;
+        indices of those whose stamp is not: they cannot be played, and a player skips,
+        warns about and counts them)."""
+        arrivals = np.asarray(self.image_arrival_times_s, float)
+        order = np.argsort(arrivals, kind="stable")
+        playable = np.isfinite(arrivals[order])
+        return order[playable], order[~playable]
+
     @property
     def duration_s(self) -> float:
         """The last ground-truth time (s); 0 for a run without ground truth."""

@@ -96,19 +96,14 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
     out_b = np.full((len(times), n), np.nan)
     out_X = np.full((len(times), 4, 4), np.nan)
     out_health = np.full(len(times), -1, int)
-    arrivals = np.asarray(run.image_arrival_times_s, float)
-    image_order = np.argsort(arrivals, kind="stable")
-    # An image whose arrival is not a finite time cannot be placed in the stream: it is
-    # skipped, warned about and counted (it was dropped silently).
-    unplayable = image_order[~np.isfinite(arrivals[image_order])]
-    image_order = image_order[np.isfinite(arrivals[image_order])]
+    image_order, unplayable = run.images_in_arrival_order()
     next_image = 0
     next_sample = 0
     skipped_images = len(unplayable)
     warnings = RateLimitedWarning(log)
     for i in unplayable:
         warnings.warn("images without an arrival time", f"image {i} skipped: its arrival "
-                      f"stamp is {float(arrivals[i])!r}, not a time")
+                      f"stamp is {float(run.image_arrival_times_s[i])!r}, not a time")
     t_start = time.perf_counter()
     bar = count_bar(len(image_order), "image", "tracking", enabled=progress)
 

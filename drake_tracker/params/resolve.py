@@ -62,7 +62,7 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
         initial_angle_std=column("initial_angle_std_rad"),
         initial_bias_std=column("initial_bias_std_rad"),
         robot=np.isin(names, model.robot_joint_names),
-        robot_indices=np.array([names.index(n) for n in model.robot_joint_names], int),
+        robot_indices=model.robot_joint_indices,
     )
     return ResolvedParams(
         joints=joints,

@@ -34,17 +34,14 @@ class RecordedRunSource(LeafSystem):
     def __init__(self, run: RecordedRun):
         super().__init__()
         self._run = run
-        arrivals = np.asarray(run.image_arrival_times_s, float)
-        order = np.argsort(arrivals, kind="stable")
-        playable = np.isfinite(arrivals[order])
+        self._arrival_order, unplayable = run.images_in_arrival_order()
         #: Images whose arrival stamp is not a time: never shown (warned about here).
-        self.num_unplayable_images = int((~playable).sum())
+        self.num_unplayable_images = len(unplayable)
         if self.num_unplayable_images:
             log.warning("%d image(s) of the run have no finite arrival stamp and are never "
                         "shown (images %s)", self.num_unplayable_images,
-                        order[~playable][:10].tolist())
-        self._arrival_order = order[playable]
-        self._arrivals = arrivals[self._arrival_order]
+                        unplayable[:10].tolist())
+        self._arrivals = run.image_arrival_times_s[self._arrival_order]
         n = len(run.joint_names)
         self.DeclareVectorOutputPort("measured_position", n, self._calc_position,
                                      {self.time_ticket()})

@@ -24,7 +24,7 @@ def initial_belief(params: ResolvedParams, first_reading: np.ndarray | None) -> 
     joints = params.joints
     mean = joints.initial_mean.copy()
     if first_reading is not None:
-        mean[params.robot_indices] = first_reading
+        mean[params.robot_joint_indices] = first_reading
     return initial_moments(mean, joints.initial_angle_std, joints.initial_bias_std,
                            joints.kalman.has_bias)
 
