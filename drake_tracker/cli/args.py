@@ -25,6 +25,13 @@ if TYPE_CHECKING:
 DEFAULT_BIAS_VARIANT = "constant"
 
 
+SCENARIO_HELP = ("a preset SEQUENCE/BIAS, e.g. occlusion/time-varying (a bare SEQUENCE "
+                 "means SEQUENCE/constant; 'drake-tracker scenarios' lists them), or a "
+                 "scenario YAML file (default: %(default)s)")
+PARAMS_HELP = ("tracker parameters YAML ('drake-tracker params --defaults' prints every "
+               "field; examples/params.yaml is a commented sample); default: the defaults")
+
+
 class UsageError(Exception):
     """A mistake in the command line: the message is one line for the user."""
 

@@ -12,30 +12,23 @@ import sys
 import textwrap
 
 from drake_tracker.cli.args import (
+    PARAMS_HELP,
+    SCENARIO_HELP,
     UsageError,
-    check_new_file,
     check_out_dir,
     check_params_for_model,
     load_params_arg,
-    load_run_arg,
     load_servo_config_arg,
-    positive_int,
     positive_seconds,
     resolve_scenario,
-    scenario_name,
 )
+from drake_tracker.cli.io_commands import add_record, add_track
 
 DESCRIPTION = """\
 Track a robot arm from its joint encoders and a depth camera, on Drake.
 
 Start with 'drake-tracker demo --duration 3' (about a minute); each command has
 its own --help."""
-
-SCENARIO_HELP = ("a preset SEQUENCE/BIAS, e.g. occlusion/time-varying (a bare SEQUENCE "
-                 "means SEQUENCE/constant; 'drake-tracker scenarios' lists them), or a "
-                 "scenario YAML file (default: %(default)s)")
-PARAMS_HELP = ("tracker parameters YAML ('drake-tracker params --defaults' prints every "
-               "field; examples/params.yaml is a commented sample); default: the defaults")
 
 
 class _CommandParser(argparse.ArgumentParser):
@@ -102,64 +95,6 @@ def _add_demo(sub) -> None:
         from drake_tracker.demo.run import run_demo
 
         return run_demo(args, scenario=scenario, params=params)
-
-    p.set_defaults(func=run)
-
-
-def _add_record(sub) -> None:
-    p = sub.add_parser(
-        "record", help="simulate a scenario and write a recorded run (.npz)",
-        description="Simulates a scenario and writes every encoder reading, every depth "
-                    "image (subsampled) and the ground truth to one .npz file (format in "
-                    "drake_tracker/io/recording.py), to replay with 'drake-tracker track'.",
-        epilog="example:\n  drake-tracker record --scenario arm/time-varying --duration 5 "
-               "--out out/arm.npz")
-    p.add_argument("--scenario", default="s-full-arm/constant", help=SCENARIO_HELP)
-    p.add_argument("--out", required=True, metavar="FILE.npz", help="output file")
-    p.add_argument("--duration", type=positive_seconds, default=None, metavar="SECONDS",
-                   help="simulate this long instead of the scenario's duration")
-    p.add_argument("--image-stride", type=positive_int, default=8, metavar="N",
-                   help="store every N-th pixel of each image row and column "
-                        "(default: %(default)s)")
-
-    def run(args):
-        resolve_scenario(args.scenario)
-        args.scenario = scenario_name(args.scenario)
-        check_new_file(args.out, ".npz")
-        from drake_tracker.sim.record import run_record
-
-        return run_record(args)
-
-    p.set_defaults(func=run)
-
-
-def _add_track(sub) -> None:
-    p = sub.add_parser(
-        "track", help="replay a recorded run through the offline tracker",
-        description="Feeds a recorded run's readings and images to the offline tracker in "
-                    "the order a live tracker receives them and prints the hand-pose error "
-                    "percentiles of the encoders alone and of the tracker.",
-        epilog="example:\n  drake-tracker record --duration 5 --out out/run.npz\n"
-               "  drake-tracker track --run out/run.npz --params examples/params.yaml")
-    p.add_argument("--run", required=True, metavar="FILE.npz",
-                   help="recorded run, written by 'drake-tracker record'")
-    p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
-    p.add_argument("--out", default=None, help="folder for report.json (optional)")
-
-    def run(args):
-        recorded = load_run_arg(args.run)
-        params = load_params_arg(args.params)
-        if args.out:
-            check_out_dir(args.out)
-        from drake_tracker.io.replay import model_for_run, run_track
-
-        try:
-            model = model_for_run(recorded)
-        except ValueError as err:
-            raise UsageError(f"'{args.run}': its robot model: {err}") from None
-        if args.params:
-            check_params_for_model(params, model, f"parameter file '{args.params}'")
-        return run_track(args, run=recorded, params=params, model=model)
 
     p.set_defaults(func=run)
 
@@ -332,7 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=_CommandParser)
-    for add in (_add_demo, _add_record, _add_track, _add_bench, _add_evaluate,
+    for add in (_add_demo, add_record, add_track, _add_bench, _add_evaluate,
                 _add_scenarios, _add_params, _add_servo):
         add(sub)
     return parser

@@ -29,6 +29,7 @@ the intrinsics are those of the stored images.
 
 from __future__ import annotations
 
+import dataclasses
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -106,6 +107,19 @@ class RecordedRun:
         order = np.argsort(arrivals, kind="stable")
         playable = np.isfinite(arrivals[order])
         return order[playable], order[~playable]
+
+    def stamped_in_nanoseconds(self) -> RecordedRun:
+        """This run with every stamp rounded to the nearest nanosecond, as real sensors
+        stamp (ROS: integer ns; LCM: µs), so a bag of it (``io/run_bag.py``) holds exactly
+        its times: the nearest float to each integer count of ns over 1e9."""
+        def ns(times: np.ndarray) -> np.ndarray:
+            return np.round(np.asarray(times, float) * 1e9) / 1e9
+
+        return dataclasses.replace(
+            self, reading_times_s=ns(self.reading_times_s),
+            image_capture_times_s=ns(self.image_capture_times_s),
+            image_arrival_times_s=ns(self.image_arrival_times_s),
+            truth_times_s=ns(self.truth_times_s))
 
     @property
     def duration_s(self) -> float:

@@ -25,7 +25,7 @@ from drake_tracker.core.filter.start import full_reading
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
 from drake_tracker.io.recording import RecordedRun
-from drake_tracker.metrics import format_report_table, method_report
+from drake_tracker.metrics import method_report
 from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.progress import count_bar
@@ -186,24 +186,22 @@ def run_report(run: RecordedRun, estimates: dict[str, np.ndarray]) -> dict:
 def run_track(args: argparse.Namespace, run: RecordedRun | None = None,
               params: TrackerParams | None = None, model: TrackerModel | None = None) -> int:
     """``drake-tracker track --run FILE [--params YAML] [--out DIR]``; ``run``,
-    ``params`` and ``model``, when given, were already loaded from those arguments."""
+    ``params`` and ``model``, when given, were already loaded from those arguments. The
+    run goes through ``io/track_files.py`` (the path a bag takes), and the encoders
+    alone are reported beside it."""
+    from drake_tracker.io.track_files import print_report, track_run
+
     run = run if run is not None else RecordedRun.load(args.run)
     params = params if params is not None else load_tracker_params(args.params)
     model = model if model is not None else model_for_run(run)
-    result = replay_run(run, params, model, progress=True)
-    report = run_report(run, {"encoders_only": encoders_only_X_CE(run, model),
-                              "full_fusion": result.X_CE})
-    updates = np.array(result.image_update_s)
-    report["images_applied"] = result.num_images_applied
-    report["images_skipped"] = result.num_images_skipped
-    report["replay_wall_time_s"] = result.wall_time_s
-    report["image_update_ms_median"] = float(1e3 * np.median(updates)) if len(updates) else None
-    print(format_report_table(report))
-    print(f"replayed {run.duration_s:.1f} s of data in {result.wall_time_s:.1f} s; "
-          f"{result.num_images_applied} images applied, {result.num_images_skipped} skipped")
-    if args.out:
-        out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+    out = Path(args.out) if args.out else None
+    report = track_run(run, model, params, out)
+    report["methods"] = {
+        "encoders_only": run_report(run, {"e": encoders_only_X_CE(run, model)})["methods"]["e"],
+        **report["methods"]}
+    print_report(report)
+    print(f"tracked {run.duration_s:.1f} s of data in {report['wall_time_s']:.1f} s")
+    if out is not None:
         (out / "report.json").write_text(json.dumps(report, indent=2))
-        print(f"wrote {out / 'report.json'}")
+        print(f"wrote {out}/: " + ", ".join(report["files"] + ["report.json"]))
     return 0

@@ -191,14 +191,24 @@ def logged_readings(logged: dict[str, np.ndarray], duration_s: float
 
 
 def run_record(args: argparse.Namespace) -> int:
-    """``drake-tracker record --scenario NAME --out FILE [--duration S] [--image-stride N]``:
-    simulates and writes the run as ``.npz`` (format in ``drake_tracker.io.recording``)."""
+    """``drake-tracker record --scenario NAME [--out FILE.npz] [--bag FILE.mcap]
+    [--duration S] [--image-stride N]``: simulates and writes the run as ``.npz`` (format
+    in ``drake_tracker.io.recording``) and/or a ROS 2 MCAP bag (``io/run_bag.py``)."""
     scenario = load_scenario(args.scenario)
     run = simulate_and_record(scenario, duration_s=args.duration,
-                              image_stride=args.image_stride, validate=False, progress=True)
-    path = run.save(args.out)
+                              image_stride=args.image_stride, validate=False, progress=True
+                              ).stamped_in_nanoseconds()
+    written = []
+    if getattr(args, "out", None):
+        written.append(str(run.save(args.out)))
+    if getattr(args, "bag", None):
+        from drake_tracker.io.run_bag import write_run_bag
+
+        count = write_run_bag(run, args.bag)
+        written.append(f"{args.bag} ({count} messages)")
     print(f"recorded '{scenario.name}': {len(run.reading_times_s)} readings, "
           f"{len(run.image_capture_times_s)} images "
           f"({run.camera_intrinsics.width}x{run.camera_intrinsics.height}), "
-          f"{len(run.truth_times_s)} truth samples, {run.extra['wall_time_s']:.1f} s -> {path}")
+          f"{len(run.truth_times_s)} truth samples, {run.extra['wall_time_s']:.1f} s -> "
+          f"{', '.join(written)}")
     return 0

@@ -1,0 +1,162 @@
+"""``drake-tracker record`` and ``drake-tracker track``: data in and out."""
+
+from __future__ import annotations
+
+import argparse
+
+from drake_tracker.cli.args import (
+    PARAMS_HELP,
+    SCENARIO_HELP,
+    UsageError,
+    check_new_file,
+    check_out_dir,
+    check_params_for_model,
+    load_params_arg,
+    load_run_arg,
+    positive_int,
+    positive_seconds,
+    resolve_scenario,
+    scenario_name,
+)
+
+
+def add_record(sub: argparse._SubParsersAction) -> None:
+    """The ``record`` subcommand."""
+    p = sub.add_parser(
+        "record", help="simulate a scenario and write a recorded run (.npz) or a bag",
+        description="Simulates a scenario and writes every encoder reading, every depth "
+                    "image (subsampled) and the ground truth to one .npz file (format in "
+                    "drake_tracker/io/recording.py), to replay with 'drake-tracker track', "
+                    "and/or to a ROS 2 MCAP bag (--bag; needs the 'ros' extra), with the "
+                    "truth on its own topics (drake_tracker/io/run_bag.py).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  drake-tracker record --scenario arm/time-varying --duration 5 "
+               "--out out/arm.npz\n  drake-tracker record --duration 5 --bag out/arm.mcap")
+    p.add_argument("--scenario", default="s-full-arm/constant", help=SCENARIO_HELP)
+    p.add_argument("--out", default=None, metavar="FILE.npz", help="recorded run to write")
+    p.add_argument("--bag", default=None, metavar="FILE.mcap",
+                   help="ROS 2 MCAP bag to write (a new file)")
+    p.add_argument("--duration", type=positive_seconds, default=None, metavar="SECONDS",
+                   help="simulate this long instead of the scenario's duration")
+    p.add_argument("--image-stride", type=positive_int, default=8, metavar="N",
+                   help="store every N-th pixel of each image row and column "
+                        "(default: %(default)s)")
+
+    def run(args):
+        if args.out is None and args.bag is None:
+            raise UsageError("say where to write the run: --out FILE.npz and/or "
+                             "--bag FILE.mcap")
+        resolve_scenario(args.scenario)
+        args.scenario = scenario_name(args.scenario)
+        if args.out is not None:
+            check_new_file(args.out, ".npz")
+        if args.bag is not None:
+            _check_new_bag(args.bag)
+        from drake_tracker.sim.record import run_record
+
+        return run_record(args)
+
+    p.set_defaults(func=run)
+
+
+def _check_new_bag(path: str) -> None:
+    from pathlib import Path
+
+    check_new_file(path, ".mcap")
+    if Path(path).exists():
+        raise UsageError(f"bag '{path}' exists: not overwritten")
+    try:
+        from drake_tracker.io.ros_messages import require_rosbags
+
+        require_rosbags()
+    except ImportError as err:
+        raise UsageError(str(err)) from None
+
+
+def add_track(sub: argparse._SubParsersAction) -> None:
+    """The ``track`` subcommand."""
+    p = sub.add_parser(
+        "track", help="track a recorded run or a ROS bag with the offline tracker",
+        description="Feeds a recorded run (--run) or a ROS bag (--bag: ROS 1 .bag, ROS 2 "
+                    "bag folder or .mcap; needs the 'ros' extra) to the offline tracker in "
+                    "the order a live tracker receives them. With --out it writes "
+                    "estimates.csv (one row per reading), estimates.mcap and report.json "
+                    "(counts, and error percentiles when the input has a truth): see "
+                    "drake_tracker/io/estimates_out.py.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  drake-tracker record --duration 5 --out out/run.npz\n"
+               "  drake-tracker track --run out/run.npz --out out/tracked\n"
+               "  drake-tracker track --bag robot.mcap --robot robot.yaml --out out/bag")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--run", metavar="FILE.npz",
+                        help="recorded run, written by 'drake-tracker record'")
+    source.add_argument("--bag", metavar="PATH",
+                        help="ROS 1 .bag, ROS 2 bag folder (sqlite3 or MCAP) or .mcap file")
+    p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
+                   help="with --bag: the robot (a RobotConfig YAML, as "
+                        "drake_tracker.robot.model.load_robot_config reads it)")
+    p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic "
+                   "(default: the only one)")
+    p.add_argument("--depth-topic", default=None, help="with --bag: the depth Image topic "
+                   "(default: the only one)")
+    p.add_argument("--camera-info-topic", default=None, help="with --bag: the CameraInfo "
+                   "topic (default: the only one)")
+    p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
+    p.add_argument("--out", default=None, help="folder for estimates.csv, estimates.mcap "
+                   "and report.json (optional)")
+
+    def run(args):
+        params = load_params_arg(args.params)
+        if args.out:
+            check_out_dir(args.out)
+        if args.bag is not None:
+            return _track_bag(args, params)
+        if args.robot is not None:
+            raise UsageError("--robot is for --bag: a recorded run carries its robot")
+        recorded = load_run_arg(args.run)
+        from drake_tracker.io.replay import model_for_run, run_track
+
+        try:
+            model = model_for_run(recorded)
+        except ValueError as err:
+            raise UsageError(f"'{args.run}': its robot model: {err}") from None
+        if args.params:
+            check_params_for_model(params, model, f"parameter file '{args.params}'")
+        return run_track(args, run=recorded, params=params, model=model)
+
+    p.set_defaults(func=run)
+
+
+def _track_bag(args, params) -> int:
+    from pathlib import Path
+
+    if args.robot is None:
+        raise UsageError("--bag needs --robot ROBOT.yaml: the robot the bag was logged on")
+    if not Path(args.robot).is_file():
+        raise UsageError(f"robot file '{args.robot}' does not exist")
+    try:
+        from drake_tracker.io.bag_source import BagSource, BagTopics
+        from drake_tracker.robot.model import build_tracker_model, load_robot_config
+
+        model = build_tracker_model(load_robot_config(Path(args.robot).read_text()))
+    except ImportError as err:
+        raise UsageError(str(err)) from None
+    except (ValueError, RuntimeError) as err:
+        raise UsageError(f"robot file '{args.robot}': {err}") from None
+    if args.params:
+        check_params_for_model(params, model, f"parameter file '{args.params}'")
+    topics = BagTopics(args.joint_topic, args.depth_topic, args.camera_info_topic)
+    try:
+        source = BagSource(args.bag, model.robot_joint_names, topics)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    from drake_tracker.io.track_files import print_report, track_bag
+
+    try:
+        report = track_bag(source, model, params, args.out)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    print_report(report)
+    if args.out:
+        print(f"wrote {args.out}/: " + ", ".join(report["files"] + ["report.json"]))
+    return 0

@@ -1,0 +1,91 @@
+"""A recorded run written as a ROS 2 MCAP bag (``drake-tracker record --bag``), so the
+bag path can be tried end to end without a robot.
+
+Topics: ``/joint_states`` (``sensor_msgs/msg/JointState``), ``/camera/depth/image_raw``
+(``32FC1``, metres, NaN: no return), ``/camera/depth/camera_info`` (one per image), and
+the truth: ``/truth/hand_pose`` (``geometry_msgs/msg/PoseStamped``, X_CE in the true
+camera frame) and ``/truth/joint_states`` (the true angles). Header stamps are the run's
+times plus ``base_ns`` (a Unix time: real bags' stamps are); each message is logged at
+its stamp, an image at its arrival.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from drake_tracker.io.bag_source import TRUTH_POSE_TOPIC
+from drake_tracker.io.estimates_out import pose_values
+from drake_tracker.io.ros_messages import RosMessages, bag_writer
+
+if TYPE_CHECKING:
+    from drake_tracker.io.recording import RecordedRun
+
+#: 2023-11-14T22:13:20Z: the default time base of a written bag (ns).
+DEFAULT_BASE_NS = 1_700_000_000 * 10**9
+CAMERA_FRAME = "camera_depth_optical_frame"
+
+
+def _ns(base_ns: int, t: float) -> int:
+    return int(base_ns) + int(round(float(t) * 1e9))
+
+
+def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BASE_NS
+                  ) -> int:
+    """Writes ``run`` to the MCAP file ``path`` (see the module); returns the number of
+    messages written."""
+    m = RosMessages()
+    writer = bag_writer(path)
+    try:
+        topics = {
+            "joints": ("/joint_states", "sensor_msgs/msg/JointState"),
+            "depth": ("/camera/depth/image_raw", "sensor_msgs/msg/Image"),
+            "info": ("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo"),
+            "truth_pose": (TRUTH_POSE_TOPIC, "geometry_msgs/msg/PoseStamped"),
+            "truth_joints": ("/truth/joint_states", "sensor_msgs/msg/JointState"),
+        }
+        connections = {k: writer.add_connection(topic, kind, typestore=m.store)
+                       for k, (topic, kind) in topics.items()}
+        count = 0
+        for log_ns, key, message in _messages(run, m, base_ns):
+            writer.write(connections[key], log_ns, m.serialize(message))
+            count += 1
+    finally:
+        writer.close()
+    return count
+
+
+def _messages(run: RecordedRun, m: RosMessages, base_ns: int) -> Iterator[tuple]:
+    """(log time ns, topic key, message) in log order, built one at a time."""
+    names = list(run.joint_names)
+    cam = run.camera_intrinsics
+
+    def readings():
+        for t, q in zip(run.reading_times_s, run.readings_rad):
+            yield _ns(base_ns, t), 0, "joints", lambda t=t, q=q: m.joint_state(
+                _ns(base_ns, t), names, q)
+
+    def images():
+        order, _ = run.images_in_arrival_order()
+        for i in order:
+            stamp = _ns(base_ns, run.image_capture_times_s[i])
+            arrival = _ns(base_ns, run.image_arrival_times_s[i])
+            yield arrival, 1, "info", lambda s=stamp: m.camera_info(
+                s, CAMERA_FRAME, cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+            yield arrival, 2, "depth", lambda s=stamp, i=i: m.depth_image(
+                s, CAMERA_FRAME, np.asarray(run.depth_images_m[i], np.float32))
+
+    def truth():
+        for t, X, q in zip(run.truth_times_s, run.truth_X_CE, run.truth_positions_rad):
+            stamp = _ns(base_ns, t)
+            yield stamp, 3, "truth_pose", lambda s=stamp, X=X: m.pose_stamped(
+                s, CAMERA_FRAME, pose_values(X))
+            yield stamp, 4, "truth_joints", lambda s=stamp, q=q: m.joint_state(s, names, q)
+
+    for log_ns, _, key, build in heapq.merge(readings(), images(), truth(),
+                                             key=lambda e: (e[0], e[1])):
+        yield log_ns, key, build()

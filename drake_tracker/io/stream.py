@@ -1,0 +1,160 @@
+"""Tracking a stream of time-stamped messages: a bag, an LCM log, a recorded run.
+
+A source yields :class:`ReadingEvent` and :class:`ImageEvent` in the order they arrived
+(a log's order), with times in seconds relative to the stream's time base (its first
+message, so that Unix stamps of 1.7e9 s lose no precision in the filter).
+:func:`track_stream` feeds them to a :class:`~drake_tracker.tracker.Tracker` and hands
+the estimate after every reading the tracker used to a sink (``io/estimates_out.py``).
+It never holds more than one message: a 10-minute bag streams in flat memory.
+
+An image arrives when the source yields it: its arrival stamp is its capture stamp or
+the latest reading's, whichever is later (a log keeps no other arrival time that shares
+the readings' clock).
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+from drake_tracker.core.sensors.depth_frames import DepthFrame
+from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
+from drake_tracker.progress import count_bar
+
+if TYPE_CHECKING:
+    from drake_tracker.core.filter.estimate import TrackerEstimate
+    from drake_tracker.tracker import Tracker
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ReadingEvent:
+    """The robot joints' encoder reading (``model.robot_joint_names`` order) at
+    ``time_s`` (s, stream time)."""
+
+    time_s: float
+    positions: np.ndarray
+
+
+@dataclass(frozen=True)
+class ImageEvent:
+    """A depth image captured at ``capture_s`` (s, stream time): float metres, or uint16
+    millimetres (0: no return), at the camera's full resolution."""
+
+    capture_s: float
+    depth: np.ndarray
+    sequence: int
+    #: When it arrived (s, stream time); None: when the source yields it (see above).
+    arrival_s: float | None = None
+
+
+@dataclass(frozen=True)
+class SkippedMessage:
+    """A message the source could not turn into an event (``why`` says what was wrong
+    with it): counted under ``kind`` and tracking goes on."""
+
+    kind: str
+    why: str
+
+
+Event = ReadingEvent | ImageEvent | SkippedMessage
+
+
+class EstimateSink(Protocol):
+    """Where :func:`track_stream` puts each estimate (``io/estimates_out.py``)."""
+
+    def write(self, estimate: TrackerEstimate) -> None:
+        """Takes the estimate after one reading."""
+
+
+@dataclass
+class StreamCounts:
+    """What a stream gave and what the tracker made of it (``report.json``)."""
+
+    readings: int = 0
+    images: int = 0
+    images_applied: int = 0
+    estimates: int = 0
+    #: Messages the source skipped, by kind (``SkippedMessage``).
+    source_skipped: dict[str, int] = field(default_factory=dict)
+    #: Readings the tracker skipped, by kind (its time-stamp policy, non-finite values).
+    readings_skipped: dict[str, int] = field(default_factory=dict)
+    #: Images the tracker skipped, by kind; ``not due`` are the ones its pacing
+    #: (``image.min_image_interval_s``) left out.
+    images_skipped: dict[str, int] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        """The counts as plain JSON types."""
+        return {"readings": self.readings, "images": self.images,
+                "images_applied": self.images_applied, "estimates": self.estimates,
+                "source_skipped": dict(self.source_skipped),
+                "readings_skipped": dict(self.readings_skipped),
+                "images_skipped": dict(self.images_skipped)}
+
+
+def track_stream(events: Iterable[Event], tracker: Tracker,
+                 sink: EstimateSink | None = None, total_images: int | None = None,
+                 progress: bool = False) -> StreamCounts:
+    """Feeds ``events`` (arrival order) to ``tracker``; after each reading it used, the
+    estimate goes to ``sink``. An image the tracker cannot use (malformed, not in
+    metres) is skipped with a rate-limited warning and counted, as is every message the
+    source skipped. Returns the counts."""
+    counts = StreamCounts()
+    warnings = RateLimitedWarning(log)
+    latest_reading_s = -np.inf
+    bar = count_bar(total_images, "image", "tracking", enabled=progress)
+    try:
+        for event in events:
+            if isinstance(event, ReadingEvent):
+                counts.readings += 1
+                skipped_before = sum(tracker.readings.warnings.counts.values())
+                tracker.add_reading(event.time_s, event.positions)
+                skipped = sum(tracker.readings.warnings.counts.values()) > skipped_before
+                if tracker.started and not skipped:
+                    latest_reading_s = max(latest_reading_s, event.time_s)
+                    if sink is not None:
+                        sink.write(tracker.estimate())
+                        counts.estimates += 1
+            elif isinstance(event, ImageEvent):
+                counts.images += 1
+                bar.update(1)
+                arrival = (max(event.capture_s, latest_reading_s) if event.arrival_s is None
+                           else event.arrival_s)
+                frame = DepthFrame(float(event.capture_s), float(arrival), event.depth,
+                                   int(event.sequence))
+                try:
+                    tracker.add_image(frame)
+                except ValueError as err:
+                    _count(counts.source_skipped, "unusable images")
+                    warnings.warn("unusable images", f"image {event.sequence} captured at "
+                                  f"{event.capture_s:.4f} s skipped: {err}")
+            else:
+                _count(counts.source_skipped, event.kind)
+                warnings.warn(event.kind, event.why)
+    finally:
+        bar.close()
+    counts.images_applied = tracker.num_images_applied
+    counts.readings_skipped = dict(tracker.readings.warnings.counts)
+    counts.images_skipped = dict(tracker.warnings.counts)
+    unexplained = tracker.num_images_skipped - sum(tracker.warnings.counts.values())
+    if unexplained > 0:
+        counts.images_skipped["not due"] = unexplained
+    return counts
+
+
+def _count(counts: dict[str, int], kind: str) -> None:
+    counts[kind] = counts.get(kind, 0) + 1
+
+
+def merge_by_time(*streams: Iterable[tuple[float, Event]]) -> Iterator[Event]:
+    """The events of several (time, event) streams, each in time order, in one time
+    order; equal times keep the order of ``streams`` (lazy: nothing is loaded whole)."""
+    tagged = [((t, k, e) for t, e in stream) for k, stream in enumerate(streams)]
+    for _, _, event in heapq.merge(*tagged, key=lambda item: (item[0], item[1])):
+        yield event

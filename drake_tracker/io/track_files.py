@@ -1,0 +1,172 @@
+"""``drake-tracker track``: a recorded run or a bag in, estimates and a report out.
+
+Both inputs go through one path, :func:`track_to_folder`: events (``io/stream.py``) into
+the offline tracker, each estimate into ``estimates.csv`` and ``estimates.mcap``
+(``io/estimates_out.py``), and ``report.json`` with the counts of what was used and
+skipped (and why), and error percentiles when the input carries a truth.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from drake_tracker.io.estimates_out import EstimatesCsv, EstimateSinks
+from drake_tracker.io.stream import Event, ImageEvent, ReadingEvent, merge_by_time, track_stream
+from drake_tracker.metrics import format_report_table, method_report
+from drake_tracker.tracker import Tracker
+
+if TYPE_CHECKING:
+    from drake_tracker.core.filter.estimate import TrackerEstimate
+    from drake_tracker.core.sensors.camera import CameraIntrinsics
+    from drake_tracker.io.bag_source import BagSource
+    from drake_tracker.io.recording import RecordedRun
+    from drake_tracker.params.tracker_params import TrackerParams
+    from drake_tracker.robot.model import TrackerModel
+
+log = logging.getLogger(__name__)
+
+
+def run_events(run: RecordedRun) -> Iterator[Event]:
+    """A recorded run's events in arrival order: each reading at its stamp, each image at
+    its recorded arrival (after the readings stamped at it). Images without an arrival
+    time are skipped and counted (``RecordedRun.images_in_arrival_order``)."""
+    from drake_tracker.io.stream import SkippedMessage
+
+    order, unplayable = run.images_in_arrival_order()
+    for i in unplayable:
+        yield SkippedMessage("images without an arrival time", f"image {i} skipped: its "
+                             f"arrival stamp is {float(run.image_arrival_times_s[i])!r}")
+    readings = ((float(t), ReadingEvent(float(t), q))
+                for t, q in zip(run.reading_times_s, run.readings_rad))
+    images = ((float(run.image_arrival_times_s[i]),
+               ImageEvent(float(run.image_capture_times_s[i]), run.depth_images_m[i], int(i),
+                          float(run.image_arrival_times_s[i]))) for i in order)
+    yield from merge_by_time(readings, images)
+
+
+class TruthSampler:
+    """Keeps the estimate's X_CE at each truth time (the latest estimate at or before
+    it), streaming: the estimates are never all held."""
+
+    def __init__(self, times_s: np.ndarray) -> None:
+        self.times_s = np.asarray(times_s, float)
+        self.X_CE = np.full((len(self.times_s), 4, 4), np.nan)
+        self._next = 0
+        self._latest: np.ndarray | None = None
+
+    def write(self, estimate: TrackerEstimate) -> None:
+        """Fills the truth times before ``estimate`` with the previous estimate."""
+        while self._next < len(self.times_s) and self.times_s[self._next] < estimate.time_s:
+            if self._latest is not None:
+                self.X_CE[self._next] = self._latest
+            self._next += 1
+        self._latest = np.array(estimate.X_CE)
+
+    def close(self) -> None:
+        """The truth times after the last estimate get it."""
+        if self._latest is not None:
+            self.X_CE[self._next:] = self._latest
+        self._next = len(self.times_s)
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The input's true hand poses: (T,) times (s, stream time) and (T, 4, 4) X_CE."""
+
+    times_s: np.ndarray
+    X_CE: np.ndarray
+
+
+def track_to_folder(events: Iterable[Event], model: TrackerModel,
+                    camera: CameraIntrinsics, params: TrackerParams | None,
+                    out_dir: str | Path | None, base_ns: int = 0,
+                    camera_frame: str = "camera", truth: Truth | None = None,
+                    total_images: int | None = None, source: dict | None = None,
+                    progress: bool = True) -> dict:
+    """Tracks ``events`` and writes ``estimates.csv``, ``estimates.mcap`` (when the
+    ``ros`` extra is installed) and ``report.json`` into ``out_dir`` (None: nothing is
+    written); returns the report."""
+    tracker = Tracker(model, camera, params)
+    sinks = []
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        sinks.append(EstimatesCsv(out / "estimates.csv", model, base_ns))
+        bag = _estimates_bag(out / "estimates.mcap", model, base_ns, camera_frame)
+        sinks.append(bag)
+    sampler = TruthSampler(truth.times_s) if truth is not None else None
+    sink = EstimateSinks(*sinks, sampler)
+    start = time.perf_counter()
+    try:
+        counts = track_stream(events, tracker, sink, total_images, progress)
+    finally:
+        sink.close()
+    report = {"input": source or {}, "counts": counts.as_dict(),
+              "wall_time_s": time.perf_counter() - start,
+              "files": [s.path.name for s in sinks if s is not None]}
+    if sampler is not None:
+        ok = np.all(np.isfinite(sampler.X_CE.reshape(len(sampler.X_CE), -1)), axis=1)
+        report["methods"] = {"full_fusion": method_report(sampler.X_CE[ok], truth.X_CE[ok])}
+    if out is not None:
+        (out / "report.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
+def _estimates_bag(path: Path, model: TrackerModel, base_ns: int, camera_frame: str):
+    try:
+        from drake_tracker.io.estimates_out import EstimatesBag
+
+        if path.exists():
+            path.unlink()
+        return EstimatesBag(path, model, base_ns, camera_frame)
+    except ImportError as err:
+        log.warning("estimates.mcap not written: %s", err)
+        return None
+
+
+def print_report(report: dict) -> None:
+    """The report in a few lines: counts, and error percentiles when there is a truth."""
+    c = report["counts"]
+    print(f"{c['readings']} readings, {c['images']} images: {c['images_applied']} applied; "
+          f"{c['estimates']} estimates written")
+    for name in ("source_skipped", "readings_skipped", "images_skipped"):
+        if c[name]:
+            print(f"  {name.replace('_', ' ')}: " +
+                  ", ".join(f"{v} {k}" for k, v in sorted(c[name].items())))
+    if "methods" in report:
+        print(format_report_table(report))
+
+
+def track_bag(source: BagSource, model: TrackerModel, params: TrackerParams | None,
+              out_dir: str | Path | None, progress: bool = True) -> dict:
+    """Tracks an open ``io/bag_source.BagSource`` into ``out_dir`` (see
+    :func:`track_to_folder`); the bag's truth topic, if any, gives error percentiles."""
+    truth = source.truth_X_CE()
+    try:
+        return track_to_folder(
+            source.events(), model, source.intrinsics, params, out_dir, source.base_ns,
+            source.camera_frame, Truth(*truth) if truth is not None else None,
+            source.num_images, {"bag": str(source.path), "joint_topic": source.joint_topic,
+                                "depth_topic": source.depth_topic,
+                                "camera_info_topic": source.camera_info_topic},
+            progress)
+    finally:
+        source.close()
+
+
+def track_run(run: RecordedRun, model: TrackerModel, params: TrackerParams | None,
+              out_dir: str | Path | None, progress: bool = True) -> dict:
+    """Tracks a recorded run into ``out_dir`` (see :func:`track_to_folder`), against its
+    truth."""
+    return track_to_folder(run_events(run), model, run.camera_intrinsics, params, out_dir,
+                           truth=Truth(run.truth_times_s, run.truth_X_CE),
+                           total_images=len(run.image_capture_times_s),
+                           source={"run": "recorded run"}, progress=progress)
