@@ -142,7 +142,7 @@ def test_a_challenger_rests_as_long_as_it_searched(scene):  # noqa: F811
     prior[MEAN_B][model.joint_names.index("arm_joint_3")] = np.radians(40.0)
     params = TrackerParams()
     params.health.second_opinion_agreement = 0.0
-    params.health.second_opinion_margin_nats = 1e5
+    params.health.second_opinion_margin_nats_per_pixel = 1e2
     params.health.challenger_images = 2
     params.image.acquisition_num_particles = 10
     outcomes = run_images(ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)),

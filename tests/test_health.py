@@ -83,6 +83,32 @@ def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
     assert with_it.state == HealthState.TRACKING
 
 
+def test_an_image_that_does_not_confirm_the_estimate_reports_uncertain_and_nothing_else():
+    """``tracking_agreement``: an image that sees through none of the arm but agrees on
+    too little of its unhidden pixels (an estimate centimetres off) reports
+    ``uncertain``; hidden pixels do not count against it; every other field is what the
+    see-through test alone (``tracking_agreement`` 0) gives."""
+    strict = HealthParams(min_robot_pixels=10, tracking_agreement=0.9)
+    lenient = HealthParams(min_robot_pixels=10, tracking_agreement=0.0)
+    close = ImageConsistency(0.0, 100, 0.95, 0.0)
+    off = ImageConsistency(0.0, 100, 0.8, 0.0)  # 80 % agree, none seen through
+    half_hidden = ImageConsistency(0.0, 100, 0.46, 0.0, occluded=0.5)  # 92 % of 50
+    images = [close, close, off, off, half_hidden, close]
+    expected = ["U", "T", "U", "U", "T", "T"]
+    a, b = TrackerHealth(), TrackerHealth()
+    for k, (image, state) in enumerate(zip(images, expected)):
+        image = ImageConsistency(0.1 * k, image.robot_pixels, image.agreement,
+                                 image.see_through, image.occluded)
+        a, b = next_health(a, image, strict), next_health(b, image, lenient)
+        assert a.state.name[0] == state, k
+        assert b.state == (HealthState.UNCERTAIN if k == 0 else HealthState.TRACKING)
+        for field in ("disagreeing_in_a_row", "agreeing_in_a_row", "confirmed_s",
+                      "acquired", "left_view"):
+            assert getattr(a, field) == getattr(b, field), (k, field)
+    with pytest.raises(ValueError, match="tracking_agreement"):
+        HealthParams(tracking_agreement=1.5).validate()
+
+
 def test_acquired_while_a_recent_image_confirmed_the_estimate():
     p = HealthParams(min_robot_pixels=10, recovered_after_images=1, reacquire_after_s=1.0)
     good = ImageConsistency(0.0, 100, 0.9, 0.02)

@@ -99,13 +99,13 @@ def _restart(p):
 
 
 def _second_opinion(p):
-    p.health.second_opinion_agreement, p.health.second_opinion_margin_nats = 1.0, 0.0
+    p.health.second_opinion_agreement, p.health.second_opinion_margin_nats_per_pixel = 1.0, 0.0
     p.image.num_particles = 5
 
 
 def _challenger(p):
     p.health.second_opinion_agreement = 0.0
-    p.health.challenger_bias_sigmas, p.health.second_opinion_margin_nats = 0.01, 0.0
+    p.health.challenger_bias_sigmas, p.health.second_opinion_margin_nats_per_pixel = 0.01, 0.0
     p.image.num_particles = 5
 
 

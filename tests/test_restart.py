@@ -37,6 +37,38 @@ CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
 SHOULDER_BIAS_RAD = np.radians(100.0)
 
 
+def test_a_restart_that_keeps_the_bias_is_a_bias_step_the_readings_hold():
+    """``Restart.kept()``: every mean stays (biases, camera offset); the reading's sum
+    a + b keeps its variance, so the next reading's innovation is unchanged, while the
+    angle marginal widens by the step's variance; commutes with an angle shift."""
+    from drake_tracker.core.filter.kalman import JointKalmanBank, KalmanBankParams
+
+    rng = np.random.default_rng(3)
+    prior = np.abs(rng.normal(size=(5, 4))) * 0.01
+    prior[COV_AB] = -0.5 * np.sqrt(prior[VAR_A] * prior[VAR_B])
+    prior[MEAN_B] = [0.3, -0.2, 0.0, 0.1]
+    step = np.array([0.1, 0.1, 0.0, 0.1]) ** 2
+    kept = Restart(np.full(4, 0.02**2), step).kept()
+    out = kept.apply(prior)
+    np.testing.assert_array_equal(out[[MEAN_A, MEAN_B]], prior[[MEAN_A, MEAN_B]])
+    np.testing.assert_allclose(out[VAR_A], prior[VAR_A] + step)
+    np.testing.assert_allclose(out[VAR_A] + 2 * out[COV_AB] + out[VAR_B],
+                               prior[VAR_A] + 2 * prior[COV_AB] + prior[VAR_B], atol=1e-15)
+    cov = np.array([[out[VAR_A], out[COV_AB]], [out[COV_AB], out[VAR_B]]]).transpose(2, 0, 1)
+    assert np.all(np.linalg.eigvalsh(cov) >= -1e-15)
+    # The same reading after either belief: the same prediction of a + b.
+    bank = JointKalmanBank(KalmanBankParams(np.full(4, 1e-3), np.full(4, 1.0),
+                                            np.array([0.02, 0.02, 0.0, 0.02]),
+                                            np.ones(4), np.array([1, 1, 0, 1], bool)))
+    reading = prior[MEAN_A] + prior[MEAN_B] + 0.01
+    a, b = bank.update(prior, reading), bank.update(out, reading)
+    np.testing.assert_allclose(a[MEAN_A] + a[MEAN_B], b[MEAN_A] + b[MEAN_B], atol=1e-12)
+    shift = rng.normal(size=4) * 0.05
+    shifted = prior.copy()
+    shifted[MEAN_A] += shift
+    np.testing.assert_allclose(kept.apply(shifted)[MEAN_A] - shift, out[MEAN_A], atol=1e-15)
+
+
 def test_restart_forgets_the_bias_and_commutes_with_an_angle_shift():
     rng = np.random.default_rng(0)
     prior = np.abs(rng.normal(size=(5, 4))) * 0.1

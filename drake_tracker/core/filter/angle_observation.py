@@ -13,7 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B, recombine_with_bias
+from drake_tracker.core.filter.kalman import (
+    COV_AB,
+    MEAN_A,
+    MEAN_B,
+    VAR_A,
+    VAR_B,
+    recombine_with_bias,
+)
 
 
 @dataclass(frozen=True)
@@ -26,20 +33,38 @@ class Restart:
     (NaN: not pinned): a pinned joint's angle mean becomes that, and its bias mean the
     prior's ``a + b`` minus it, so the sum the readings measure is kept. Commutes with a
     shift of the unpinned angles (the virtual joints are never shifted), so it can be
-    stored at an image's anchor."""
+    stored at an image's anchor.
+
+    With ``keep_bias`` it keeps what is known instead: every mean stays (the biases and
+    the camera offset), and each joint's bias takes a step of variance ``bias_var``
+    while its reading holds ``a + b`` (the bias-jump model): ``var_b += B``,
+    ``var_a += B``, ``cov_ab -= B``. Its angle marginal then covers the zero-bias arm
+    at ``|b| / sqrt(var_b + B)`` standard deviations, instead of forgetting the bias."""
 
     angle_var: np.ndarray
     bias_var: np.ndarray
     pinned_angle: np.ndarray | None = None
+    keep_bias: bool = False
 
     def pinned(self, angle: np.ndarray | None) -> Restart:
         """This restart with ``pinned_angle`` = ``angle`` (None: none pinned)."""
         return Restart(self.angle_var, self.bias_var, angle)
 
+    def kept(self) -> Restart:
+        """This restart keeping the biases and the camera offset (``keep_bias``)."""
+        return Restart(self.angle_var, self.bias_var, None, keep_bias=True)
+
     def apply(self, prior: np.ndarray) -> np.ndarray:
         """The restarted (5, n) belief: angle means ``a + b`` of ``prior`` (or the pinned
         angle), bias means 0 (or ``a + b`` minus the pinned angle), angle-bias covariances
-        0, variances ``angle_var`` and ``bias_var``."""
+        0, variances ``angle_var`` and ``bias_var``; with ``keep_bias``, ``prior`` with a
+        bias step of variance ``bias_var`` (see the class)."""
+        if self.keep_bias:
+            kept = np.array(prior, float, copy=True)
+            kept[VAR_A] += self.bias_var
+            kept[VAR_B] += self.bias_var
+            kept[COV_AB] -= self.bias_var
+            return kept
         restarted = np.zeros_like(prior)
         restarted[MEAN_A] = prior[MEAN_A] + prior[MEAN_B]
         if self.pinned_angle is not None:

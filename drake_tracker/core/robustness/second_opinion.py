@@ -5,8 +5,8 @@ about as well as its neighbours, no single update leaves it. Two searches start 
 the tracker itself starts, at the encoders' arm (the challenger's first image also from
 the estimate's camera offset: ``EncoderSearch.restarts``), and replace the update's
 answer when the image's log-likelihood at their mean beats it by
-``health.second_opinion_margin_nats`` (both scored on the image without the occlusion
-estimate):
+``health.second_opinion_margin_nats_per_pixel`` times the image's valid pixels (both
+scored on the image without the occlusion estimate):
 
 * :meth:`EncoderSearch.second_opinion`: one image's search, on an image that contradicts
   the estimate (``is_surprising``) or sees the arm again (``is_reacquiring``);
@@ -135,7 +135,8 @@ class EncoderSearch:
     def _beats(self, result: CPFResult, alternative: CPFResult,
                plain: PreparedObservation) -> tuple[bool, np.ndarray]:
         scores = self.update.log_likelihood(np.stack([result.mean, alternative.mean]), plain)
-        return bool(scores[1] > scores[0] + self.params.health.second_opinion_margin_nats), scores
+        margin = self.params.health.second_opinion_margin_nats_per_pixel * plain.num_valid
+        return bool(scores[1] > scores[0] + margin), scores
 
     def restarts(self, prior: np.ndarray) -> list[Restart]:
         """The restarts a challenger tries at its first image: to the encoders' arm seen
@@ -187,7 +188,9 @@ class EncoderSearch:
         followed it for good. (Searching from the estimate's camera offset as well, as
         the challenger does, was worse where the head moves the camera: on both and
         both++ time-varying, seeds 4-9, 28 s above 200 mm in all against 7 s.)"""
-        best = self._search(plain, [(self.restart.apply(prior), self.restart)], time_s, rng)
+        kept = self.restart.kept()
+        best = self._search(plain, [(self.restart.apply(prior), self.restart),
+                                    (kept.apply(prior), kept)], time_s, rng)
         if best is None:
             return None
         alternative, candidate, restart = best
