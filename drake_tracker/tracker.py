@@ -24,7 +24,7 @@ from drake_tracker.core.cpf.image_update import check_depth_image
 from drake_tracker.core.cpf.particle_filter import CPFResult
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
 from drake_tracker.core.filter.estimate import PoseReadout, TrackerEstimate, estimate_from_belief
-from drake_tracker.core.filter.start import full_reading, new_belief_buffer
+from drake_tracker.core.filter.start import full_reading, new_belief_buffer, start_reading_ok
 from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.image_step import (
     ImagePacing,
@@ -88,11 +88,14 @@ class Tracker:
         if not self.params.use_joint_readings:
             self.buffer = new_belief_buffer(self.params, 0.0, None)
 
-    def add_reading(self, t: float, robot_reading: np.ndarray) -> None:
+    def add_reading(self, t: float, robot_reading: np.ndarray) -> bool:
         """An encoder reading of the robot joints (``model.robot_joint_names`` order),
-        stamped ``t`` (s). Raises ValueError for a wrong length. A reading with a value or
-        stamp that is not usable is skipped with a warning (``core/sensors/timestamps.py``):
-        one per run of non-finite values, rate-limited for stamps."""
+        stamped ``t`` (s); True when it was used. Raises ValueError for a wrong length. A
+        reading whose stamp is not usable, or with no usable value, is skipped with a
+        warning (``core/sensors/timestamps.py``): one per run of non-finite readings,
+        rate-limited for stamps. Joints whose value alone is not usable (NaN) are
+        predicted and the others filtered (``ReadingGate.admit``); the first reading
+        must have them all."""
         try:
             t = float(t)
         except (TypeError, ValueError) as err:
@@ -107,13 +110,17 @@ class Tracker:
                              f"({n},) for joints {self.model.robot_joint_names}")
         t = self.readings.admit(t, reading)
         if t is None:
-            return
+            return False
         if not self.params.use_joint_readings:
             self.buffer.advance_to(t)
-            return
+            return True
+        reading = self.readings.values
         if self.buffer is None or self.readings.restarted:  # a restart: from this reading
+            if not start_reading_ok(reading, self.readings.warnings):
+                return False
             self.buffer = new_belief_buffer(self.params, t, reading)
         self.buffer.add_reading(t, full_reading(self.params, reading))
+        return True
 
     def add_image(self, frame: DepthFrame) -> bool:
         """A depth image (full resolution of ``camera``; float metres, or uint16

@@ -117,7 +117,7 @@ def test_cpf_system_skips_a_millimetre_image_with_a_warning(apollo, run, caplog)
 def test_a_replay_skips_bad_samples_with_their_time_and_finishes(apollo, run, caplog):
     """Finding 8: one NaN reading aborted the whole replay, with no time stamp given."""
     readings = run.readings_rad.copy()
-    readings[21, 2] = np.nan
+    readings[21] = np.nan
     images = run.depth_images_m.copy()
     images[4] *= 1000.0
     bad = replace(run, readings_rad=readings, depth_images_m=images)

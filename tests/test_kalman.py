@@ -141,7 +141,34 @@ def test_bad_readings_are_rejected():
     with pytest.raises(ValueError, match="shape"):
         bank.step(m, 0.001, np.zeros(3))
     with pytest.raises(ValueError, match="j1"):
-        bank.step(m, 0.001, np.array([0.0, np.nan]))
+        bank.step(m, 0.001, np.array([0.0, np.inf]))
+    with pytest.raises(ValueError, match="no value"):
+        bank.step(m, 0.001, np.array([np.nan, np.nan]))
+
+
+def test_a_joint_without_a_value_is_predicted_and_the_others_filtered():
+    """NaN for one joint: that joint's moments are the prediction alone (angle variance
+    capped at ``missing_angle_var``, its covariance kept within the Cauchy-Schwarz
+    bound); every other joint's are exactly what a reading of it alone gives."""
+    params = KalmanBankParams(np.full(3, 1e-3), np.full(3, 10.0), np.full(3, 0.02),
+                              np.full(3, 0.98), np.ones(3, bool), names=("a", "b", "c"))
+    cap = np.full(3, 0.035 ** 2)
+    bank = JointKalmanBank(params, missing_angle_var=cap)
+    m = initial_moments(np.array([0.1, 0.2, 0.3]), np.full(3, 0.01), np.full(3, 0.1),
+                        np.ones(3, bool))
+    m = bank.step(m, 0.001, np.array([0.1, 0.2, 0.3]))
+    reading = np.array([0.11, np.nan, 0.29])
+    out = bank.step(m, 0.01, reading)
+    full = bank.step(m, 0.01, np.array([0.11, 0.2, 0.29]))
+    np.testing.assert_array_equal(out[:, [0, 2]], full[:, [0, 2]])
+    predicted = bank.predict(m, 0.01)
+    np.testing.assert_array_equal(out[[MEAN_A, MEAN_B, VAR_B], 1],
+                                  predicted[[MEAN_A, MEAN_B, VAR_B], 1])
+    assert predicted[VAR_A, 1] > cap[1] and out[VAR_A, 1] == cap[1]
+    assert out[COV_AB, 1] ** 2 <= out[VAR_A, 1] * out[VAR_B, 1] + 1e-18
+    # Without a cap the angle variance is the prediction's: radians wide in 0.1 s.
+    free = JointKalmanBank(params).step(m, 0.1, reading)
+    assert np.sqrt(free[VAR_A, 1]) > 1.0
 
 
 def test_the_bank_is_consistent_nees_within_the_chi2_bounds():

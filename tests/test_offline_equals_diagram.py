@@ -66,6 +66,12 @@ def _stamp_faults(run):
 
 def _nan_burst(run):
     burst = run.readings_rad.copy()
+    burst[(run.reading_times_s >= 0.15) & (run.reading_times_s < 0.3)] = np.nan
+    return replace(run, readings_rad=burst), None, None
+
+
+def _one_joint_nan_burst(run):
+    burst = run.readings_rad.copy()
     burst[(run.reading_times_s >= 0.15) & (run.reading_times_s < 0.3), 1] = np.nan
     return replace(run, readings_rad=burst), None, None
 
@@ -119,6 +125,8 @@ CASES = {
         diagram_log=("restarted", "far in the future", "re-anchored")),
     "NaN burst": Case(faults=_nan_burst, some_skipped=True,
                       diagram_log=("not finite", "gap of the joint readings")),
+    "one joint's NaN burst": Case(faults=_one_joint_nan_burst, all_applied=True,
+                                  diagram_log=("no usable value",)),
     "glitched first stamp": Case(faults=_glitched_first_stamp, first=10,
                                  offline_log=("restarted at",)),
     "a clock step of both streams": Case(faults=_shared_clock_step, some_skipped=True,

@@ -12,6 +12,7 @@ from fast_params import small_params
 from offline_vs_diagram import H, feed, simulate
 
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
+from drake_tracker.core.filter.kalman import VAR_A
 from drake_tracker.core.filter.start import full_reading, new_belief_buffer
 from drake_tracker.core.sensors.stamp_params import TimestampParams
 from drake_tracker.io.synthetic import synthetic_run
@@ -103,7 +104,7 @@ def test_a_nan_burst_gives_one_warning_and_no_wide_prior(apollo, run, caplog):
     skipped (it would have a radians-wide prior), the others are applied."""
     burst = run.readings_rad.copy()
     gap = (run.reading_times_s >= 0.15) & (run.reading_times_s < 0.3)
-    burst[gap, 1] = np.nan
+    burst[gap] = np.nan
     with caplog.at_level(logging.INFO):
         tracker = Tracker(apollo, run.camera_intrinsics, small_params())
         _, applied = feed(tracker, run, readings=burst)
@@ -118,6 +119,46 @@ def test_a_nan_burst_gives_one_warning_and_no_wide_prior(apollo, run, caplog):
     assert outside and all(applied[j] for j in outside)
     assert np.all(np.sqrt(tracker.estimate().position_variances) < 0.1)
     assert "re-aligned" not in caplog.text  # a real gap says nothing about the clocks
+    assert tracker.readings.warnings.counts["non-finite readings"] == gap.sum()
+
+
+def test_one_joint_without_values_is_predicted_and_the_others_used(apollo, run, caplog):
+    """Issue 44: one joint's encoder gives NaN for 0.15 s. The other joints' values are
+    used, one warning names the joint, the images inside the burst are applied, and the
+    joint's prior there is no wider than the start's angle prior (not the angle random
+    walk's radians: ``JointKalmanBank.missing_angle_var``)."""
+    burst = run.readings_rad.copy()
+    gap = (run.reading_times_s >= 0.15) & (run.reading_times_s < 0.3)
+    burst[gap, 1] = np.nan
+    params = small_params()
+    priors = []
+    with caplog.at_level(logging.INFO):
+        tracker = Tracker(apollo, run.camera_intrinsics, params)
+        original = tracker.images.observe
+
+        def observe(frame, prior, *args, **kwargs):
+            priors.append((frame.capture_time_s, prior.copy()))
+            return original(frame, prior, *args, **kwargs)
+
+        tracker.images.observe = observe
+        _, applied = feed(tracker, run, readings=burst)
+    name = apollo.robot_joint_names[1]
+    partial = [r for r in caplog.records if "no usable value" in r.getMessage()]
+    assert len(partial) == 1 and name in partial[0].getMessage()
+    assert "every joint again" in caplog.text and "not finite" not in caplog.text
+    assert tracker.readings.warnings.counts["readings with missing joints"] == gap.sum()
+    inside = [j for j in applied if 0.16 < run.image_capture_times_s[j] < 0.29]
+    assert inside and all(applied[j] for j in inside)
+    index = apollo.robot_joint_indices[1]
+    start_std = tracker.params.joints.initial_angle_std[index]
+    inside_priors = [p for t, p in priors if 0.16 < t < 0.29]
+    assert inside_priors
+    for prior in inside_priors:
+        assert np.sqrt(prior[VAR_A, index]) <= start_std + 1e-12
+        assert np.isfinite(prior).all()
+    others = [i for i in apollo.robot_joint_indices if i != index]
+    np.testing.assert_array_less(np.sqrt(inside_priors[-1][VAR_A, others]), start_std)
+    assert np.all(np.isfinite(tracker.estimate().positions))
 
 
 # ----------------------------------------------------------------- the same in the Diagram

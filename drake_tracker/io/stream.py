@@ -32,6 +32,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: The reading gate's count of readings used without some joints (not skipped).
+PARTIAL = "readings with missing joints"
+
 
 @dataclass(frozen=True)
 class ReadingEvent:
@@ -85,6 +88,8 @@ class StreamCounts:
     source_skipped: dict[str, int] = field(default_factory=dict)
     #: Readings the tracker skipped, by kind (its time-stamp policy, non-finite values).
     readings_skipped: dict[str, int] = field(default_factory=dict)
+    #: Readings used although some joints had no value (those joints were predicted).
+    readings_with_missing_joints: int = 0
     #: Images the tracker skipped, by kind; ``not due`` are the ones its pacing
     #: (``image.min_image_interval_s``) left out.
     images_skipped: dict[str, int] = field(default_factory=dict)
@@ -95,6 +100,7 @@ class StreamCounts:
                 "images_applied": self.images_applied, "estimates": self.estimates,
                 "source_skipped": dict(self.source_skipped),
                 "readings_skipped": dict(self.readings_skipped),
+                "readings_with_missing_joints": self.readings_with_missing_joints,
                 "images_skipped": dict(self.images_skipped)}
 
 
@@ -113,10 +119,7 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
         for event in events:
             if isinstance(event, ReadingEvent):
                 counts.readings += 1
-                skipped_before = sum(tracker.readings.warnings.counts.values())
-                tracker.add_reading(event.time_s, event.positions)
-                skipped = sum(tracker.readings.warnings.counts.values()) > skipped_before
-                if tracker.started and not skipped:
+                if tracker.add_reading(event.time_s, event.positions):
                     latest_reading_s = max(latest_reading_s, event.time_s)
                     if sink is not None:
                         sink.write(tracker.estimate())
@@ -140,7 +143,9 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
     finally:
         bar.close()
     counts.images_applied = tracker.num_images_applied
-    counts.readings_skipped = dict(tracker.readings.warnings.counts)
+    skipped = dict(tracker.readings.warnings.counts)
+    counts.readings_with_missing_joints = skipped.pop(PARTIAL, 0)
+    counts.readings_skipped = skipped
     counts.images_skipped = dict(tracker.warnings.counts)
     unexplained = tracker.num_images_skipped - sum(tracker.warnings.counts.values())
     if unexplained > 0:

@@ -11,7 +11,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
 
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
-from drake_tracker.core.filter.start import full_reading, new_belief_buffer
+from drake_tracker.core.filter.start import full_reading, new_belief_buffer, start_reading_ok
 from drake_tracker.core.image_step import judge_stamp, place_image
 from drake_tracker.core.sensors.depth_frames import DepthFrame, image_time
 from drake_tracker.core.sensors.reading_gate import ReadingGate
@@ -175,7 +175,10 @@ class DelayBufferSystem(LeafSystem):
             s.last_reading_time_s = t
             return
         restarted = s.readings.restarted
+        values = s.readings.values  # NaN for joints without a usable value
         if s.buffer is None or restarted:  # built on outlier stamps: restart from here
+            if not start_reading_ok(values, s.readings.warnings):
+                return
             s.buffer = new_belief_buffer(p, t, values)
         else:
             s.buffer = s.buffer.copy()

@@ -265,7 +265,9 @@ class BeliefBuffer:
         fraction = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
         q_at_image = q0 + fraction * (q1 - q0)
         anchor = before if t - t0 <= t1 - t else after
-        shift = q_at_image - events[anchor].reading
+        # A joint without a value at either reading (NaN) is held where the anchor's
+        # belief has it.
+        shift = np.nan_to_num(q_at_image - events[anchor].reading, nan=0.0)
         # The latest belief at the anchor's time (after any observation stored there).
         prior = self.belief_at(times[anchor]).copy()
         prior[MEAN_A] = prior[MEAN_A] + shift

@@ -104,6 +104,8 @@ def _predict_inplace(m, dt, sa2, sb2, log_c):
 @numba.njit(cache=True)
 def _update_inplace(m, q, sq2):
     for j in range(m.shape[1]):
+        if q[j] != q[j]:  # NaN: this joint's encoder gave no value; it is only predicted
+            continue
         saa = m[VAR_A, j]
         sab = m[COV_AB, j]
         sbb = m[VAR_B, j]
@@ -120,17 +122,41 @@ def _update_inplace(m, q, sq2):
 
 
 @numba.njit(cache=True)
-def _step_inplace(m, dt, q, sa2, sb2, log_c, sq2):
+def _cap_missing_inplace(m, q, cap):
+    """A joint without a value (NaN) keeps its angle variance at most ``cap`` (and its
+    angle-bias covariance within the Cauchy-Schwarz bound of the capped variance)."""
+    for j in range(m.shape[1]):
+        if q[j] == q[j] or m[VAR_A, j] <= cap[j]:
+            continue
+        m[VAR_A, j] = cap[j]
+        bound = np.sqrt(cap[j] * m[VAR_B, j])
+        m[COV_AB, j] = min(max(m[COV_AB, j], -bound), bound)
+
+
+@numba.njit(cache=True)
+def _step_inplace(m, dt, q, sa2, sb2, log_c, sq2, cap):
     if dt > 0.0:
         _predict_inplace(m, dt, sa2, sb2, log_c)
+    _cap_missing_inplace(m, q, cap)
     _update_inplace(m, q, sq2)
 
 
 class JointKalmanBank:
-    """The Kalman bank for fixed parameters. Beliefs are (5, n) arrays; steps copy them."""
+    """The Kalman bank for fixed parameters. Beliefs are (5, n) arrays; steps copy them.
 
-    def __init__(self, params: KalmanBankParams):
+    A reading may lack some joints (NaN: that encoder gave no value): those joints are
+    predicted, not updated, and their angle variance grows no wider than
+    ``missing_angle_var`` (n,) (default: unbounded). The tracker bounds it at the start's
+    angle variance (``core/filter/start.py``): the angle random walk σa is large so that
+    the angle follows its encoder; without one it would put a radians-wide prior on the
+    joint within milliseconds, and the image update could not search it.
+    """
+
+    def __init__(self, params: KalmanBankParams, missing_angle_var: np.ndarray | None = None):
         self.params = params
+        n = params.num_joints
+        self._cap = (np.full(n, np.inf) if missing_angle_var is None
+                     else np.asarray(missing_angle_var, float).reshape(n).copy())
         self._sa2 = np.asarray(params.angle_process_std, float) ** 2
         self._sb2 = params.effective_bias_std().astype(float) ** 2
         self._log_c = np.log(np.asarray(params.bias_decay_per_s, float))
@@ -142,16 +168,18 @@ class JointKalmanBank:
         return self.params.num_joints
 
     def check_reading(self, reading: np.ndarray) -> np.ndarray:
-        """``reading`` as a float (n,) array; a ValueError for a wrong shape, or naming the
-        joints whose value is not finite."""
+        """``reading`` as a float (n,) array; a ValueError for a wrong shape, for no value
+        at all, or naming the joints whose value is infinite (NaN: no value, allowed)."""
         reading = np.asarray(reading, dtype=float)
         if reading.shape != (self.num_joints,):
             raise ValueError(
                 f"joint reading has shape {reading.shape}, expected ({self.num_joints},)")
-        if not np.isfinite(reading).all():
+        if np.isinf(reading).any():
             bad = [self.params.names[i] if self.params.names else str(i)
-                   for i in np.flatnonzero(~np.isfinite(reading))]
-            raise ValueError(f"joint reading is not finite for joints {bad}")
+                   for i in np.flatnonzero(np.isinf(reading))]
+            raise ValueError(f"joint reading is infinite for joints {bad}")
+        if np.isnan(reading).all() and reading.size:
+            raise ValueError("joint reading has no value (all NaN)")
         return reading
 
     def predict(self, moments: np.ndarray, dt: float) -> np.ndarray:
@@ -166,7 +194,9 @@ class JointKalmanBank:
     def update(self, moments: np.ndarray, reading: np.ndarray) -> np.ndarray:
         """Moments after an encoder reading (model 3)."""
         out = moments.copy()
-        _update_inplace(out, self.check_reading(reading), self._sq2)
+        reading = self.check_reading(reading)
+        _cap_missing_inplace(out, reading, self._cap)
+        _update_inplace(out, reading, self._sq2)
         return out
 
     def step(self, moments: np.ndarray, dt: float, reading: np.ndarray) -> np.ndarray:
@@ -175,13 +205,14 @@ class JointKalmanBank:
             raise ValueError(f"cannot predict backwards in time (dt = {dt} s)")
         out = moments.copy()
         _step_inplace(out, float(dt), self.check_reading(reading), self._sa2, self._sb2,
-                      self._log_c, self._sq2)
+                      self._log_c, self._sq2, self._cap)
         return out
 
     def step_unchecked(self, moments: np.ndarray, dt: float, reading: np.ndarray) -> np.ndarray:
         """``step`` for readings that were already checked (replays of the buffer)."""
         out = moments.copy()
-        _step_inplace(out, dt, reading, self._sa2, self._sb2, self._log_c, self._sq2)
+        _step_inplace(out, dt, reading, self._sa2, self._sb2, self._log_c, self._sq2,
+                      self._cap)
         return out
 
 

@@ -10,11 +10,13 @@ import numpy as np
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
 from drake_tracker.core.filter.kalman import JointKalmanBank, initial_moments
 from drake_tracker.core.resolved_params import ResolvedParams
+from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
 
 
 def new_bank(params: ResolvedParams) -> JointKalmanBank:
-    """The Kalman bank on (angle, bias) for every joint of the resolved model."""
-    return JointKalmanBank(params.joints.kalman)
+    """The Kalman bank on (angle, bias) for every joint of the resolved model; a joint
+    whose reading lacks a value keeps an angle prior no wider than the start's."""
+    return JointKalmanBank(params.joints.kalman, params.joints.initial_angle_std ** 2)
 
 
 def initial_belief(params: ResolvedParams, first_reading: np.ndarray | None) -> np.ndarray:
@@ -34,6 +36,16 @@ def new_belief_buffer(params: ResolvedParams, t: float,
     """The delay buffer started at ``t`` from the first reading (None: vision only)."""
     return BeliefBuffer(new_bank(params), initial_belief(params, first_reading), t,
                         params.buffer_horizon_s, params.max_interpolation_gap_s)
+
+
+def start_reading_ok(reading: np.ndarray, warnings: RateLimitedWarning) -> bool:
+    """Whether the filter can start from ``reading``: it has a value for every joint
+    (a joint without one would start nowhere); if not, a rate-limited warning."""
+    if np.isfinite(reading).all():
+        return True
+    warnings.warn("first readings with missing joints", "joint reading skipped: the "
+                  "filter starts from a reading with a value for every joint")
+    return False
 
 
 def new_bank_and_belief(params: ResolvedParams, first_reading: np.ndarray | None

@@ -33,6 +33,11 @@ class RateLimitedWarning:
             self.logger.warning("%s%s", message, suffix)
 
 
+    def count(self, kind: str) -> None:
+        """Counts one event of ``kind`` without logging it (its caller logged it once)."""
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+
+
 def _is_power_of_ten(count: int) -> bool:
     while count % 10 == 0:
         count //= 10

@@ -50,6 +50,11 @@ class ReadingGate:
         self.last_raw_s = float("nan")
         self.gap_start_s: float | None = None
         self.gap_readings = 0
+        #: The latest admitted reading's values, with NaN for the joints that had none
+        #: (non-finite, or beyond ``MAX_READING_MAGNITUDE``): the callers filter these.
+        self.values: np.ndarray | None = None
+        #: The joints missing from the current run of partial readings (warned once).
+        self.missing: tuple[str, ...] = ()
         #: Whether the latest admitted reading restarted the time base
         #: (``StampDecision.restarted``): the caller restarts its belief from it.
         self.restarted = False
@@ -72,24 +77,35 @@ class ReadingGate:
         return is_new_stamp(raw_s, self.last_raw_s)
 
     def admit(self, raw_s: float, values: np.ndarray) -> float | None:
-        """The reading's time in the tracker's time base, or None (skipped, logged)."""
+        """The reading's time in the tracker's time base, or None (skipped, logged). A
+        reading with some joints' values unusable (non-finite, or absurd) is admitted
+        with NaN for them (``values``; those joints are predicted, the others filtered),
+        with one warning per run of such readings; with none usable it is skipped (an
+        encoder gap: one warning when it starts)."""
         self.last_raw_s = float(raw_s)
         self.restarted = False
+        self.values = values = np.asarray(values, float)
         # NaN, ±inf, absurd values: a plain loop over the few joints is the fast check.
+        partial: tuple[str, ...] = ()
         if not all(abs(v) <= MAX_READING_MAGNITUDE for v in np.ravel(values).tolist()):
             with np.errstate(invalid="ignore"):
                 bad = ~(np.abs(values) <= MAX_READING_MAGNITUDE)
-            if self.gap_start_s is None:
-                self.gap_start_s = float(raw_s)
-                names = [n for n, b in zip(self.joint_names, bad, strict=True) if b]
-                if self.logger:
-                    self.logger.warning(
-                        "joint reading stamped %.4f s is not finite (%s; or beyond "
-                        "±1e6, which overflows the filter): readings are skipped until "
-                        "they are finite again (one warning per gap)",
-                        raw_s, ", ".join(names))
-            self.gap_readings += 1
-            return None
+            names = tuple(n for n, b in zip(self.joint_names, bad, strict=True) if b)
+            if not bad.all():  # some joints have a value: those are used
+                partial = names
+                self.values = np.where(bad, np.nan, values)
+            else:
+                if self.gap_start_s is None:
+                    self.gap_start_s = float(raw_s)
+                    if self.logger:
+                        self.logger.warning(
+                            "joint reading stamped %.4f s is not finite (%s; or beyond "
+                            "±1e6, which overflows the filter): readings are skipped "
+                            "until they are finite again (one warning per gap)",
+                            raw_s, ", ".join(names))
+                self.gap_readings += 1
+                self.warnings.count("non-finite readings")
+                return None
         decision = self.clock.check(raw_s)
         if decision.time_s is None:
             self.warnings.warn(decision.kind, f"joint reading skipped: {decision.problem}")
@@ -106,4 +122,18 @@ class ReadingGate:
             self.gap_start_s, self.gap_readings = None, 0
         if decision.reanchored_by_s is not None and self.logger:
             log_reanchor(self.logger, "joint reading", decision, raw_s, self.clock)
+        if partial != self.missing:
+            if partial and self.logger:
+                self.logger.warning(
+                    "joint reading stamped %.4f s has no usable value for %s (non-finite, "
+                    "or beyond ±1e6): %s predicted from the images until %s again, the "
+                    "other joints filtered (one warning per run)", raw_s,
+                    ", ".join(partial), "it is" if len(partial) == 1 else "they are",
+                    "it reads" if len(partial) == 1 else "they read")
+            elif self.logger:
+                self.logger.info("joint reading stamped %.4f s has every joint again",
+                                 raw_s)
+            self.missing = partial
+        if partial:
+            self.warnings.count("readings with missing joints")
         return decision.time_s
