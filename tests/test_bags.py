@@ -15,13 +15,14 @@ import pytest
 
 pytest.importorskip("rosbags")
 
+from fast_params import small_params as fast_params  # noqa: E402
+
 from drake_tracker.io.bag_source import BagSource, BagTopics  # noqa: E402
 from drake_tracker.io.estimates_out import read_estimates_csv, stamp_text  # noqa: E402
 from drake_tracker.io.ros_messages import RosMessages, bag_writer, depth_from_image  # noqa: E402
 from drake_tracker.io.run_bag import DEFAULT_BASE_NS, write_run_bag  # noqa: E402
 from drake_tracker.io.synthetic import synthetic_run  # noqa: E402
 from drake_tracker.io.track_files import track_bag, track_run  # noqa: E402
-from fast_params import small_params as fast_params  # noqa: E402
 
 
 @pytest.fixture(scope="module")
