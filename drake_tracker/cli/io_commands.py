@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from drake_tracker.cli.args import (
     PARAMS_HELP,
@@ -18,6 +19,9 @@ from drake_tracker.cli.args import (
     resolve_scenario,
     scenario_name,
 )
+
+if TYPE_CHECKING:
+    from drake_tracker.robot.model import TrackerModel
 
 
 def add_record(sub: argparse._SubParsersAction) -> None:
@@ -157,7 +161,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def robot_model(path: str | None, flag: str):
+def robot_model(path: str | None, flag: str) -> TrackerModel:
     """The TrackerModel of ``--robot path``, which ``flag`` needs; a UsageError naming
     what is wrong."""
     from pathlib import Path

@@ -68,7 +68,7 @@ def write_run_lcm_log(run: RecordedRun, path: str | Path, base_us: int = DEFAULT
     log = lcm.EventLog(str(path), "w")
     count = 0
     try:
-        for log_us, channel, data in _messages(run, base_us, depth_type, compress):
+        for log_us, channel, data in run_messages(run, base_us, depth_type, compress):
             log.write_event(log_us, channel, data)
             count += 1
     finally:
@@ -76,9 +76,11 @@ def write_run_lcm_log(run: RecordedRun, path: str | Path, base_us: int = DEFAULT
     return count
 
 
-def _messages(run: RecordedRun, base_us: int, depth_type: str, compress: bool
-              ) -> Iterator[tuple[int, str, bytes]]:
-    """(log time µs, channel, encoded message) in log order, built one at a time."""
+def run_messages(run: RecordedRun, base_us: int = DEFAULT_BASE_US,
+                 depth_type: str = "float32", compress: bool = False
+                 ) -> Iterator[tuple[int, str, bytes]]:
+    """(log time µs, channel, encoded message) of ``run`` in log order, built one at a
+    time (see the module): what a log of it holds, or a live robot would publish."""
     def readings():
         for t, q in zip(run.reading_times_s, run.readings_rad):
             stamp = _us(base_us, t)
