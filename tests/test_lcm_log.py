@@ -190,6 +190,9 @@ def test_bad_logs_are_named(apollo, tmp_path):
             (t0, "IIWA_STATUS", status_message(t0, np.zeros(7))), *good[1:]]), names, CAMERA)
     with pytest.raises(ValueError, match="are not lcmt_panda_status .*: lcmt_iiwa_status"):
         LcmLogSource(ok, names, CAMERA, status_type="panda")
+    with pytest.raises(ValueError, match="the first message on IIWA_STATUS cannot be decoded"):
+        LcmLogSource(_write(tmp_path / "cut.lcmlog", [
+            (t0, "IIWA_STATUS", good[0][2][:30]), *good[1:]]), names, CAMERA)
     with pytest.raises(ValueError, match="are not lcmt_iiwa_status or lcmt_panda_status"):
         LcmLogSource(_write(tmp_path / "other.lcmlog", [
             (t0, "IIWA_STATUS", b"\x00" * 40), *good[1:]]), names, CAMERA)

@@ -19,6 +19,12 @@ from drake_tracker.cli.args import (
     resolve_scenario,
     scenario_name,
 )
+from drake_tracker.cli.lcm_args import (
+    add_lcm_track_arguments,
+    check_lcm_flags,
+    check_new_lcm_log,
+    track_lcm_log_command,
+)
 
 if TYPE_CHECKING:
     from drake_tracker.robot.model import TrackerModel
@@ -67,8 +73,6 @@ def add_record(sub: argparse._SubParsersAction) -> None:
         if args.bag is not None:
             _check_new_bag(args.bag)
         if args.lcm_log is not None:
-            from drake_tracker.cli.lcm_args import check_new_lcm_log
-
             check_new_lcm_log(args.lcm_log)
         from drake_tracker.sim.record import run_record
 
@@ -126,8 +130,6 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    "(default: the only one)")
     p.add_argument("--camera-info-topic", default=None, help="with --bag: the CameraInfo "
                    "topic (default: the only one)")
-    from drake_tracker.cli.lcm_args import add_lcm_track_arguments
-
     add_lcm_track_arguments(p)
     p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
     p.add_argument("--out", default=None, help="folder for estimates.csv, estimates.mcap "
@@ -137,8 +139,6 @@ def add_track(sub: argparse._SubParsersAction) -> None:
         params = load_params_arg(args.params)
         if args.out:
             check_out_dir(args.out)
-        from drake_tracker.cli.lcm_args import check_lcm_flags, track_lcm_log_command
-
         check_lcm_flags(args)
         if args.bag is not None:
             return _track_bag(args, params)

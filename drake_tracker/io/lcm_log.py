@@ -136,7 +136,11 @@ class LcmLogSource:
             raise ValueError(f"LCM log {self.path}: the messages on {status_channel} are not "
                              f"{expected} (fingerprint {bytes(data[:8]).hex()}{seen})")
         self.status_type = found
-        utime, positions = decode_status(data, found)
+        try:
+            utime, positions = decode_status(data, found)
+        except ValueError as err:
+            raise ValueError(f"LCM log {self.path}: the first message on {status_channel} "
+                             f"cannot be decoded: {err}") from None
         if positions.size != len(self.joint_names):
             raise ValueError(f"LCM log {self.path}: the status messages on {status_channel} "
                              f"hold {positions.size} joints, the model has "
@@ -144,8 +148,8 @@ class LcmLogSource:
                              f"the status has no joint names, so the counts must match")
         stamps = [utime]
         try:
-            stamps.append(depth_from_image_array(decode(lcmt_image_array,
-                first[image_channel].data))[0])
+            first_image = decode(lcmt_image_array, first[image_channel].data)
+            stamps.append(depth_from_image_array(first_image)[0])
         except ValueError:
             pass  # the first image is skipped and counted by events()
         #: The time base (integer µs): the first status or depth message's stamp.
