@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from drake_tracker.cli.args import (
     PARAMS_HELP,
@@ -18,24 +19,43 @@ from drake_tracker.cli.args import (
     resolve_scenario,
     scenario_name,
 )
+from drake_tracker.cli.lcm_args import (
+    add_lcm_track_arguments,
+    check_lcm_flags,
+    check_new_lcm_log,
+    track_lcm_log_command,
+)
+
+if TYPE_CHECKING:
+    from drake_tracker.robot.model import TrackerModel
 
 
 def add_record(sub: argparse._SubParsersAction) -> None:
     """The ``record`` subcommand."""
     p = sub.add_parser(
-        "record", help="simulate a scenario and write a recorded run (.npz) or a bag",
+        "record", help="simulate a scenario and write a recorded run (.npz), a bag or an "
+                       "LCM log",
         description="Simulates a scenario and writes every encoder reading, every depth "
                     "image (subsampled) and the ground truth to one .npz file (format in "
                     "drake_tracker/io/recording.py), to replay with 'drake-tracker track', "
                     "and/or to a ROS 2 MCAP bag (--bag; needs the 'ros' extra), with the "
-                    "truth on its own topics (drake_tracker/io/run_bag.py).",
+                    "truth on its own topics (drake_tracker/io/run_bag.py), and/or to an "
+                    "lcm-logger file (--lcm-log; needs the 'lcm' extra; Drake's "
+                    "IIWA_STATUS and DRAKE_RGBD_CAMERA_IMAGES channels, no truth: "
+                    "drake_tracker/io/run_lcm_log.py). With --lcm-log every stamp is "
+                    "rounded to whole microseconds, in all the files written, and the "
+                    "camera is printed as the --camera argument of 'track --lcm-log'.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  drake-tracker record --scenario arm/time-varying --duration 5 "
-               "--out out/arm.npz\n  drake-tracker record --duration 5 --bag out/arm.mcap")
+               "--out out/arm.npz\n  drake-tracker record --duration 5 --bag out/arm.mcap\n"
+               "  drake-tracker record --duration 5 --out out/arm.npz --lcm-log "
+               "out/arm.lcmlog")
     p.add_argument("--scenario", default="s-full-arm/constant", help=SCENARIO_HELP)
     p.add_argument("--out", default=None, metavar="FILE.npz", help="recorded run to write")
     p.add_argument("--bag", default=None, metavar="FILE.mcap",
                    help="ROS 2 MCAP bag to write (a new file)")
+    p.add_argument("--lcm-log", default=None, metavar="FILE",
+                   help="lcm-logger file to write (a new file)")
     p.add_argument("--duration", type=positive_seconds, default=None, metavar="SECONDS",
                    help="simulate this long instead of the scenario's duration")
     p.add_argument("--image-stride", type=positive_int, default=8, metavar="N",
@@ -43,15 +63,17 @@ def add_record(sub: argparse._SubParsersAction) -> None:
                         "(default: %(default)s)")
 
     def run(args):
-        if args.out is None and args.bag is None:
-            raise UsageError("say where to write the run: --out FILE.npz and/or "
-                             "--bag FILE.mcap")
+        if args.out is None and args.bag is None and args.lcm_log is None:
+            raise UsageError("say where to write the run: --out FILE.npz, --bag FILE.mcap "
+                             "and/or --lcm-log FILE")
         resolve_scenario(args.scenario)
         args.scenario = scenario_name(args.scenario)
         if args.out is not None:
             check_new_file(args.out, ".npz")
         if args.bag is not None:
             _check_new_bag(args.bag)
+        if args.lcm_log is not None:
+            check_new_lcm_log(args.lcm_log)
         from drake_tracker.sim.record import run_record
 
         return run_record(args)
@@ -76,9 +98,13 @@ def _check_new_bag(path: str) -> None:
 def add_track(sub: argparse._SubParsersAction) -> None:
     """The ``track`` subcommand."""
     p = sub.add_parser(
-        "track", help="track a recorded run or a ROS bag with the offline tracker",
-        description="Feeds a recorded run (--run) or a ROS bag (--bag: ROS 1 .bag, ROS 2 "
-                    "bag folder or .mcap; needs the 'ros' extra) to the offline tracker in "
+        "track", help="track a recorded run, a ROS bag or an LCM log with the offline "
+                      "tracker",
+        description="Feeds a recorded run (--run), a ROS bag (--bag: ROS 1 .bag, ROS 2 "
+                    "bag folder or .mcap; needs the 'ros' extra) or an lcm-logger file "
+                    "(--lcm-log: Drake's lcmt_iiwa_status or lcmt_panda_status and "
+                    "lcmt_image_array depth; needs the 'lcm' extra; see "
+                    "drake_tracker/io/lcm_log.py) to the offline tracker in "
                     "the order a live tracker receives them. With --out it writes "
                     "estimates.csv (one row per reading), estimates.mcap and report.json "
                     "(counts, and error percentiles when the input has a truth): see "
@@ -86,14 +112,17 @@ def add_track(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  drake-tracker record --duration 5 --out out/run.npz\n"
                "  drake-tracker track --run out/run.npz --out out/tracked\n"
-               "  drake-tracker track --bag robot.mcap --robot robot.yaml --out out/bag")
+               "  drake-tracker track --bag robot.mcap --robot robot.yaml --out out/bag\n"
+               "  drake-tracker track --lcm-log robot.lcmlog --robot robot.yaml "
+               "--camera 640x480:615.0,615.0,319.5,239.5 --out out/lcm")
     source = p.add_mutually_exclusive_group(required=True)
     source.add_argument("--run", metavar="FILE.npz",
                         help="recorded run, written by 'drake-tracker record'")
     source.add_argument("--bag", metavar="PATH",
                         help="ROS 1 .bag, ROS 2 bag folder (sqlite3 or MCAP) or .mcap file")
+    source.add_argument("--lcm-log", metavar="FILE", help="lcm-logger file")
     p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
-                   help="with --bag: the robot (a RobotConfig YAML, as "
+                   help="with --bag or --lcm-log: the robot (a RobotConfig YAML, as "
                         "drake_tracker.robot.model.load_robot_config reads it)")
     p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic "
                    "(default: the only one)")
@@ -101,6 +130,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                    "(default: the only one)")
     p.add_argument("--camera-info-topic", default=None, help="with --bag: the CameraInfo "
                    "topic (default: the only one)")
+    add_lcm_track_arguments(p)
     p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
     p.add_argument("--out", default=None, help="folder for estimates.csv, estimates.mcap "
                    "and report.json (optional)")
@@ -109,10 +139,14 @@ def add_track(sub: argparse._SubParsersAction) -> None:
         params = load_params_arg(args.params)
         if args.out:
             check_out_dir(args.out)
+        check_lcm_flags(args)
         if args.bag is not None:
             return _track_bag(args, params)
+        if args.lcm_log is not None:
+            return track_lcm_log_command(args, params, robot_model(args.robot, "--lcm-log"))
         if args.robot is not None:
-            raise UsageError("--robot is for --bag: a recorded run carries its robot")
+            raise UsageError("--robot is for --bag and --lcm-log: a recorded run carries "
+                             "its robot")
         recorded = load_run_arg(args.run)
         from drake_tracker.io.replay import model_for_run, run_track
 
@@ -127,22 +161,32 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _track_bag(args, params) -> int:
+def robot_model(path: str | None, flag: str) -> TrackerModel:
+    """The TrackerModel of ``--robot path``, which ``flag`` needs; a UsageError naming
+    what is wrong."""
     from pathlib import Path
 
-    if args.robot is None:
-        raise UsageError("--bag needs --robot ROBOT.yaml: the robot the bag was logged on")
-    if not Path(args.robot).is_file():
-        raise UsageError(f"robot file '{args.robot}' does not exist")
+    if path is None:
+        raise UsageError(f"{flag} needs --robot ROBOT.yaml: the robot the log was recorded "
+                         "on")
+    if not Path(path).is_file():
+        raise UsageError(f"robot file '{path}' does not exist")
     try:
-        from drake_tracker.io.bag_source import BagSource, BagTopics
         from drake_tracker.robot.model import build_tracker_model, load_robot_config
 
-        model = build_tracker_model(load_robot_config(Path(args.robot).read_text()))
+        return build_tracker_model(load_robot_config(Path(path).read_text()))
     except ImportError as err:
         raise UsageError(str(err)) from None
     except (ValueError, RuntimeError) as err:
-        raise UsageError(f"robot file '{args.robot}': {err}") from None
+        raise UsageError(f"robot file '{path}': {err}") from None
+
+
+def _track_bag(args, params) -> int:
+    model = robot_model(args.robot, "--bag")
+    try:
+        from drake_tracker.io.bag_source import BagSource, BagTopics
+    except ImportError as err:
+        raise UsageError(str(err)) from None
     if args.params:
         check_params_for_model(params, model, f"parameter file '{args.params}'")
     topics = BagTopics(args.joint_topic, args.depth_topic, args.camera_info_topic)

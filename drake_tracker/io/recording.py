@@ -108,18 +108,31 @@ class RecordedRun:
         playable = np.isfinite(arrivals[order])
         return order[playable], order[~playable]
 
-    def stamped_in_nanoseconds(self) -> RecordedRun:
-        """This run with every stamp rounded to the nearest nanosecond, as real sensors
-        stamp (ROS: integer ns; LCM: µs), so a bag of it (``io/run_bag.py``) holds exactly
-        its times: the nearest float to each integer count of ns over 1e9."""
-        def ns(times: np.ndarray) -> np.ndarray:
-            return np.round(np.asarray(times, float) * 1e9) / 1e9
+    def stamped_in(self, ticks_per_second: int) -> RecordedRun:
+        """This run with every stamp rounded to the nearest tick of a clock with
+        ``ticks_per_second`` ticks (an integer), as real sensors stamp: the nearest float
+        to each integer count of ticks over ``ticks_per_second``, which is what a log of
+        integer ticks read back gives."""
+        per_second = int(ticks_per_second)
+
+        def ticks(times: np.ndarray) -> np.ndarray:
+            return np.round(np.asarray(times, float) * per_second) / per_second
 
         return dataclasses.replace(
-            self, reading_times_s=ns(self.reading_times_s),
-            image_capture_times_s=ns(self.image_capture_times_s),
-            image_arrival_times_s=ns(self.image_arrival_times_s),
-            truth_times_s=ns(self.truth_times_s))
+            self, reading_times_s=ticks(self.reading_times_s),
+            image_capture_times_s=ticks(self.image_capture_times_s),
+            image_arrival_times_s=ticks(self.image_arrival_times_s),
+            truth_times_s=ticks(self.truth_times_s))
+
+    def stamped_in_nanoseconds(self) -> RecordedRun:
+        """:meth:`stamped_in` ns, as ROS stamps: a bag of it (``io/run_bag.py``) holds
+        exactly its times."""
+        return self.stamped_in(10**9)
+
+    def stamped_in_microseconds(self) -> RecordedRun:
+        """:meth:`stamped_in` µs, as LCM stamps (``utime``): an LCM log of it
+        (``io/run_lcm_log.py``) holds exactly its times; they are whole ns too."""
+        return self.stamped_in(10**6)
 
     @property
     def duration_s(self) -> float:

@@ -1,6 +1,7 @@
-"""``drake-tracker track``: a recorded run or a bag in, estimates and a report out.
+"""``drake-tracker track``: a recorded run, a bag or an LCM log in, estimates and a
+report out.
 
-Both inputs go through one path, :func:`track_to_folder`: events (``io/stream.py``) into
+All inputs go through one path, :func:`track_to_folder`: events (``io/stream.py``) into
 the offline tracker, each estimate into ``estimates.csv`` and ``estimates.mcap``
 (``io/estimates_out.py``), and ``report.json`` with the counts of what was used and
 skipped (and why), and error percentiles when the input carries a truth.
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
     from drake_tracker.core.filter.estimate import TrackerEstimate
     from drake_tracker.core.sensors.camera import CameraIntrinsics
     from drake_tracker.io.bag_source import BagSource
+    from drake_tracker.io.lcm_log import LcmLogSource
     from drake_tracker.io.recording import RecordedRun
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
@@ -170,3 +172,16 @@ def track_run(run: RecordedRun, model: TrackerModel, params: TrackerParams | Non
                            truth=Truth(run.truth_times_s, run.truth_X_CE),
                            total_images=len(run.image_capture_times_s),
                            source={"run": "recorded run"}, progress=progress)
+
+
+def track_lcm_log(source: LcmLogSource, model: TrackerModel, params: TrackerParams | None,
+                  out_dir: str | Path | None, progress: bool = True) -> dict:
+    """Tracks an ``io/lcm_log.LcmLogSource`` into ``out_dir`` (see
+    :func:`track_to_folder`); an LCM log has no truth, so no error percentiles."""
+    return track_to_folder(
+        source.events(), model, source.intrinsics, params, out_dir, source.base_ns,
+        total_images=source.num_images,
+        source={"lcm_log": str(source.path), "status_channel": source.status_channel,
+                "status_type": f"lcmt_{source.status_type}_status",
+                "image_channel": source.image_channel},
+        progress=progress)

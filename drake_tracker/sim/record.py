@@ -192,12 +192,16 @@ def logged_readings(logged: dict[str, np.ndarray], duration_s: float
 
 def run_record(args: argparse.Namespace) -> int:
     """``drake-tracker record --scenario NAME [--out FILE.npz] [--bag FILE.mcap]
-    [--duration S] [--image-stride N]``: simulates and writes the run as ``.npz`` (format
-    in ``drake_tracker.io.recording``) and/or a ROS 2 MCAP bag (``io/run_bag.py``)."""
+    [--lcm-log FILE] [--duration S] [--image-stride N]``: simulates and writes the run as
+    ``.npz`` (format in ``drake_tracker.io.recording``), a ROS 2 MCAP bag
+    (``io/run_bag.py``) and/or an LCM log (``io/run_lcm_log.py``; then every stamp is in
+    whole µs)."""
     scenario = load_scenario(args.scenario)
+    lcm_log = getattr(args, "lcm_log", None)
     run = simulate_and_record(scenario, duration_s=args.duration,
-                              image_stride=args.image_stride, validate=False, progress=True
-                              ).stamped_in_nanoseconds()
+                              image_stride=args.image_stride, validate=False, progress=True)
+    # An LCM log stamps in µs: then every file gets the µs stamps, so they agree.
+    run = run.stamped_in_microseconds() if lcm_log else run.stamped_in_nanoseconds()
     written = []
     if getattr(args, "out", None):
         written.append(str(run.save(args.out)))
@@ -206,6 +210,13 @@ def run_record(args: argparse.Namespace) -> int:
 
         count = write_run_bag(run, args.bag)
         written.append(f"{args.bag} ({count} messages)")
+    if lcm_log:
+        from drake_tracker.io.lcm_messages import camera_text
+        from drake_tracker.io.run_lcm_log import write_run_lcm_log
+
+        count = write_run_lcm_log(run, lcm_log)
+        written.append(f"{lcm_log} ({count} messages; track it with --camera "
+                       f"{camera_text(run.camera_intrinsics)})")
     print(f"recorded '{scenario.name}': {len(run.reading_times_s)} readings, "
           f"{len(run.image_capture_times_s)} images "
           f"({run.camera_intrinsics.width}x{run.camera_intrinsics.height}), "

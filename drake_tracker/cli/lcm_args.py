@@ -1,0 +1,88 @@
+"""The LCM arguments of ``drake-tracker track`` and ``record`` (``cli/io_commands.py``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from drake_tracker.cli.args import UsageError, check_params_for_model
+
+if TYPE_CHECKING:
+    from drake_tracker.params.tracker_params import TrackerParams
+    from drake_tracker.robot.model import TrackerModel
+
+#: The flags that only go with ``--lcm-log`` (argparse dests).
+LCM_TRACK_FLAGS = ("camera", "status_channel", "image_channel", "status_type")
+
+
+def add_lcm_track_arguments(p: argparse.ArgumentParser) -> None:
+    """Adds ``track``'s ``--camera``, ``--status-channel``, ``--image-channel`` and
+    ``--status-type``."""
+    p.add_argument("--camera", default=None, metavar="WxH:fx,fy,cx,cy",
+                   help="with --lcm-log: the depth camera's intrinsics in pixels, e.g. "
+                        "640x480:615.0,615.0,319.5,239.5 (an lcmt_image carries none; "
+                        "'record --lcm-log' prints its camera in this form)")
+    p.add_argument("--status-channel", default=None, help="with --lcm-log: the status "
+                   "channel (default: IIWA_STATUS or PANDA_STATUS, whichever the log has)")
+    p.add_argument("--image-channel", default=None, help="with --lcm-log: the "
+                   "lcmt_image_array channel (default: DRAKE_RGBD_CAMERA_IMAGES)")
+    p.add_argument("--status-type", default=None, choices=("auto", "iiwa", "panda"),
+                   help="with --lcm-log: the status message type (default: auto, by the "
+                        "messages' fingerprint)")
+
+
+def check_lcm_flags(args: argparse.Namespace) -> None:
+    """The LCM flags go with ``--lcm-log`` only, and ``--lcm-log`` needs ``--camera``."""
+    given = [f"--{k.replace('_', '-')}" for k in LCM_TRACK_FLAGS
+             if getattr(args, k) is not None]
+    if args.lcm_log is None and given:
+        raise UsageError(f"{', '.join(given)}: only with --lcm-log")
+    if args.lcm_log is not None and args.camera is None:
+        raise UsageError("--lcm-log needs --camera WIDTHxHEIGHT:fx,fy,cx,cy: an LCM depth "
+                         "image does not carry its intrinsics")
+
+
+def check_new_lcm_log(path: str) -> None:
+    """``record --lcm-log``'s file: new, not a folder, and the ``lcm`` extra installed."""
+    if Path(path).is_dir():
+        raise UsageError(f"output file '{path}' is a folder")
+    if Path(path).exists():
+        raise UsageError(f"LCM log '{path}' exists: not overwritten")
+    try:
+        from drake_tracker.io.lcm_messages import require_lcm
+
+        require_lcm()
+    except ImportError as err:
+        raise UsageError(str(err)) from None
+
+
+def track_lcm_log_command(args: argparse.Namespace, params: TrackerParams,
+                          model: TrackerModel) -> int:
+    """``drake-tracker track --lcm-log FILE --robot ROBOT.yaml --camera ...``: the log
+    through ``io/track_files.track_lcm_log``; every fault a one-line UsageError."""
+    from drake_tracker.io.lcm_messages import DRAKE_RGBD_CAMERA_IMAGES, camera_from_text
+
+    try:
+        camera = camera_from_text(args.camera)
+    except ValueError as err:
+        raise UsageError(f"--camera: {err}") from None
+    if args.params:
+        check_params_for_model(params, model, f"parameter file '{args.params}'")
+    try:
+        from drake_tracker.io.lcm_log import LcmLogSource
+        from drake_tracker.io.track_files import print_report, track_lcm_log
+
+        source = LcmLogSource(args.lcm_log, model.robot_joint_names, camera,
+                              args.status_channel,
+                              args.image_channel or DRAKE_RGBD_CAMERA_IMAGES,
+                              args.status_type or "auto")
+        report = track_lcm_log(source, model, params, args.out)
+    except (ImportError, ValueError) as err:
+        raise UsageError(" ".join(str(err).split())) from None
+    print(f"{args.lcm_log}: {source.status_channel} (lcmt_{source.status_type}_status), "
+          f"{source.image_channel} (lcmt_image_array)")
+    print_report(report)
+    if args.out:
+        print(f"wrote {args.out}/: " + ", ".join(report["files"] + ["report.json"]))
+    return 0
