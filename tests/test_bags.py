@@ -217,3 +217,25 @@ def test_depth_encodings(tmp_path):
     bad.data = bad.data[:5]
     with pytest.raises(ValueError, match="truncated"):
         depth_from_image(bad)
+
+
+def test_an_image_logged_before_the_reading_after_its_capture_waits_for_it(run, apollo):
+    """A log that records each image as it is captured holds it before the reading that
+    follows its capture; the stream feeds it after that reading instead of letting the
+    tracker call it "from the future", and applies every image the recorded arrivals
+    do."""
+    from drake_tracker.io.stream import ImageEvent, ReadingEvent, merge_by_time, track_stream
+    from drake_tracker.io.track_files import run_events
+    from drake_tracker.tracker import Tracker
+
+    readings = ((t, ReadingEvent(t, q)) for t, q in zip(run.reading_times_s,
+                                                        run.readings_rad))
+    images = ((t, ImageEvent(t, run.depth_images_m[i], i))
+              for i, t in enumerate(run.image_capture_times_s))
+    at_capture = track_stream(merge_by_time(images, readings),
+                              Tracker(apollo, run.camera_intrinsics, fast_params()))
+    recorded = track_stream(run_events(run), Tracker(apollo, run.camera_intrinsics,
+                                                     fast_params()))
+    assert "images: future" not in at_capture.images_skipped
+    assert at_capture.images_applied == recorded.images_applied == len(
+        run.image_capture_times_s)

@@ -123,7 +123,8 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     source.add_argument("--lcm-log", metavar="FILE", help="lcm-logger file")
     p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
                    help="with --bag or --lcm-log: the robot (a RobotConfig YAML, as "
-                        "drake_tracker.robot.model.load_robot_config reads it)")
+                        "drake_tracker.robot.model.load_robot_config reads it, or a "
+                        "shipped preset: apollo, arm6)")
     p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic "
                    "(default: the only one)")
     p.add_argument("--depth-topic", default=None, help="with --bag: the depth Image topic "
@@ -162,15 +163,23 @@ def add_track(sub: argparse._SubParsersAction) -> None:
 
 
 def robot_model(path: str | None, flag: str) -> TrackerModel:
-    """The TrackerModel of ``--robot path``, which ``flag`` needs; a UsageError naming
+    """The TrackerModel of ``--robot path`` (a RobotConfig YAML file, or the name of a
+    shipped preset: ``apollo``, ``arm6``), which ``flag`` needs; a UsageError naming
     what is wrong."""
     from pathlib import Path
 
+    from drake_tracker.robot.model import ROBOT_PRESETS
+
     if path is None:
         raise UsageError(f"{flag} needs --robot ROBOT.yaml: the robot the log was recorded "
-                         "on")
+                         f"on (or a preset: {', '.join(sorted(ROBOT_PRESETS))})")
+    if path in ROBOT_PRESETS and not Path(path).is_file():
+        from drake_tracker.robot.model import build_tracker_model, robot_preset
+
+        return build_tracker_model(robot_preset(path))
     if not Path(path).is_file():
-        raise UsageError(f"robot file '{path}' does not exist")
+        raise UsageError(f"robot file '{path}' does not exist (presets: "
+                         f"{', '.join(sorted(ROBOT_PRESETS))})")
     try:
         from drake_tracker.robot.model import build_tracker_model, load_robot_config
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import heapq
 import logging
+from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
@@ -108,38 +109,53 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
                  sink: EstimateSink | None = None, total_images: int | None = None,
                  progress: bool = False) -> StreamCounts:
     """Feeds ``events`` (arrival order) to ``tracker``; after each reading it used, the
-    estimate goes to ``sink``. An image the tracker cannot use (malformed, not in
-    metres) is skipped with a rate-limited warning and counted, as is every message the
-    source skipped. Returns the counts."""
+    estimate goes to ``sink``. An image captured after the latest reading (a log that
+    records it as it comes, before the reading that follows its capture) waits for that
+    reading: the tracker places an image between readings, and would call it "from the
+    future". An image the tracker cannot use (malformed, not in metres) is skipped with
+    a rate-limited warning and counted, as is every message the source skipped. Returns
+    the counts."""
     counts = StreamCounts()
     warnings = RateLimitedWarning(log)
     latest_reading_s = -np.inf
-    bar = count_bar(total_images, "image", "tracking", enabled=progress)
+    waiting: deque[ImageEvent] = deque()
+    bar = count_bar(total_images or 0, "image", "tracking", enabled=progress)
+
+    def feed(image: ImageEvent, waited: bool = False) -> None:
+        bar.update(1)
+        arrival = (max(image.capture_s, latest_reading_s)
+                   if image.arrival_s is None or waited else image.arrival_s)
+        frame = DepthFrame(float(image.capture_s), float(arrival), image.depth,
+                           int(image.sequence))
+        try:
+            tracker.add_image(frame)
+        except ValueError as err:
+            _count(counts.source_skipped, "unusable images")
+            warnings.warn("unusable images", f"image {image.sequence} captured at "
+                          f"{image.capture_s:.4f} s skipped: {err}")
+
     try:
         for event in events:
             if isinstance(event, ReadingEvent):
                 counts.readings += 1
                 if tracker.add_reading(event.time_s, event.positions):
                     latest_reading_s = max(latest_reading_s, event.time_s)
+                    while waiting and waiting[0].capture_s <= latest_reading_s:
+                        feed(waiting.popleft(), waited=True)
                     if sink is not None:
                         sink.write(tracker.estimate())
                         counts.estimates += 1
             elif isinstance(event, ImageEvent):
                 counts.images += 1
-                bar.update(1)
-                arrival = (max(event.capture_s, latest_reading_s) if event.arrival_s is None
-                           else event.arrival_s)
-                frame = DepthFrame(float(event.capture_s), float(arrival), event.depth,
-                                   int(event.sequence))
-                try:
-                    tracker.add_image(frame)
-                except ValueError as err:
-                    _count(counts.source_skipped, "unusable images")
-                    warnings.warn("unusable images", f"image {event.sequence} captured at "
-                                  f"{event.capture_s:.4f} s skipped: {err}")
+                if waiting or event.capture_s > latest_reading_s:
+                    waiting.append(event)
+                else:
+                    feed(event)
             else:
                 _count(counts.source_skipped, event.kind)
                 warnings.warn(event.kind, event.why)
+        while waiting:  # no reading came after them: the tracker says why it skips them
+            feed(waiting.popleft(), waited=True)
     finally:
         bar.close()
     counts.images_applied = tracker.num_images_applied
