@@ -239,3 +239,74 @@ def test_an_image_logged_before_the_reading_after_its_capture_waits_for_it(run, 
     assert "images: future" not in at_capture.images_skipped
     assert at_capture.images_applied == recorded.images_applied == len(
         run.image_capture_times_s)
+
+
+def _as_ros1(message, store):
+    """The same message as a ROS 1 (Noetic) one: fields matched by name, case aside
+    (CameraInfo's ``d`` is ``D`` there), ``header.seq`` 0."""
+    import dataclasses
+
+    kind = store.types[message.__msgtype__]
+    values = {}
+    for f in dataclasses.fields(kind):
+        if f.name == "__msgtype__":
+            continue
+        if f.name == "seq":
+            values[f.name] = 0
+            continue
+        value = getattr(message, f.name, None)
+        if value is None:
+            value = getattr(message, f.name.lower())
+        if hasattr(value, "__msgtype__"):
+            value = _as_ros1(value, store)
+        values[f.name] = value
+    return kind(**values)
+
+
+@pytest.mark.parametrize("storage", ["ros1", "sqlite3"])
+def test_ros1_bags_and_sqlite3_folders_read_as_the_mcap_does(run, bag, apollo, tmp_path,
+                                                             storage):
+    """The same messages written by rosbags' own writers as a ROS 1 ``.bag`` (with ROS 1
+    field names: ``header.seq``, ``CameraInfo.D``/``K``) and as a ROS 2 bag folder in
+    sqlite3 storage give the events the MCAP file gives."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    if storage == "ros1":
+        from rosbags.rosbag1 import Writer
+
+        path, store = tmp_path / "run.bag", get_typestore(Stores.ROS1_NOETIC)
+        writer = Writer(path)
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        path, store = tmp_path / "run_sqlite3", get_typestore(Stores.ROS2_HUMBLE)
+        writer = Writer(path, version=8, storage_plugin=StoragePlugin.SQLITE3)
+    writer.open()
+    connections = {}
+    with AnyReader([bag]) as reader:
+        for connection, log_ns, raw in reader.messages():
+            message = reader.deserialize(raw, connection.msgtype)
+            if connection.topic not in connections:
+                connections[connection.topic] = writer.add_connection(
+                    connection.topic, connection.msgtype, typestore=store)
+            if storage == "ros1":
+                data = store.serialize_ros1(_as_ros1(message, store), connection.msgtype)
+            else:
+                data = store.serialize_cdr(message, connection.msgtype)
+            writer.write(connections[connection.topic], log_ns, data)
+    writer.close()
+    expected = list(BagSource(bag, apollo.robot_joint_names).events())
+    source = BagSource(path, apollo.robot_joint_names)
+    assert source.intrinsics == run.camera_intrinsics
+    got = list(source.events())
+    assert len(got) == len(expected)
+    for a, b in zip(got, expected):
+        assert type(a) is type(b)
+        if hasattr(a, "positions"):
+            assert a.time_s == b.time_s
+            np.testing.assert_array_equal(a.positions, b.positions)
+        else:
+            assert (a.capture_s, a.sequence, a.arrival_s) == (b.capture_s, b.sequence,
+                                                              b.arrival_s)
+            np.testing.assert_array_equal(a.depth, b.depth)
