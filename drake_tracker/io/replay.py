@@ -23,12 +23,11 @@ import numpy as np
 from drake_tracker.core.filter.estimate import PoseReadout
 from drake_tracker.core.filter.start import full_reading
 from drake_tracker.core.sensors.depth_frames import DepthFrame
-from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
 from drake_tracker.io.recording import RecordedRun
+from drake_tracker.io.stream import track_stream
 from drake_tracker.metrics import method_report
 from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
-from drake_tracker.progress import count_bar
 from drake_tracker.robot.model import (
     RobotConfig,
     TrackerModel,
@@ -74,6 +73,28 @@ def model_for_run(run: RecordedRun) -> TrackerModel:
     return build_tracker_model(robot_config_from_yaml(run.robot_config_yaml))
 
 
+class _Sampler:
+    """The tracker's estimate at each sample time: the one after every event before it
+    (``StreamObserver``)."""
+
+    def __init__(self, times_s: np.ndarray, n: int) -> None:
+        self.times_s = times_s
+        self.next = 0
+        self.q = np.full((len(times_s), n), np.nan)
+        self.var = np.full((len(times_s), n), np.nan)
+        self.b = np.full((len(times_s), n), np.nan)
+        self.X = np.full((len(times_s), 4, 4), np.nan)
+        self.health = np.full(len(times_s), -1, int)
+
+    def before(self, time_s: float, tracker: Tracker) -> None:
+        while self.next < len(self.times_s) and self.times_s[self.next] < time_s:
+            if tracker.started:
+                e, k = tracker.estimate(), self.next
+                self.q[k], self.var[k], self.b[k] = e.positions, e.position_variances, e.biases
+                self.X[k], self.health[k] = e.X_CE, int(e.health.state)
+            self.next += 1
+
+
 def replay_run(run: RecordedRun, params: TrackerParams | None = None,
                model: TrackerModel | None = None,
                sample_times_s: np.ndarray | None = None,
@@ -83,70 +104,27 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
     """Replays ``run`` through a fresh :class:`Tracker` and samples its estimates;
     ``progress`` shows a bar of the images fed (stderr); ``on_image(tracker, frame)`` is
     called after each image the tracker accepted (to trace it; an exception it raises
-    ends the replay and reaches the caller)."""
+    ends the replay and reaches the caller). The events go through
+    ``io/stream.py:track_stream``, the path of ``drake-tracker track``."""
+    from drake_tracker.io.track_files import run_events
+
     model = model if model is not None else model_for_run(run)
     if list(run.joint_names) != list(model.robot_joint_names):
         raise ValueError(f"the run's joints {run.joint_names} differ from the model's "
                          f"{model.robot_joint_names}")
     tracker = Tracker(model, run.camera_intrinsics, params)
     times = run.truth_times_s if sample_times_s is None else np.asarray(sample_times_s)
-    n = model.num_joints
-    out_q = np.full((len(times), n), np.nan)
-    out_var = np.full((len(times), n), np.nan)
-    out_b = np.full((len(times), n), np.nan)
-    out_X = np.full((len(times), 4, 4), np.nan)
-    out_health = np.full(len(times), -1, int)
-    image_order, unplayable = run.images_in_arrival_order()
-    next_image = 0
-    next_sample = 0
-    skipped_images = len(unplayable)
-    warnings = RateLimitedWarning(log)
-    for i in unplayable:
-        warnings.warn("images without an arrival time", f"image {i} skipped: its arrival "
-                      f"stamp is {float(run.image_arrival_times_s[i])!r}, not a time")
+    sampler = _Sampler(times, model.num_joints)
     t_start = time.perf_counter()
-    bar = count_bar(len(image_order), "image", "tracking", enabled=progress)
-
-    def sample_until(t_limit: float) -> None:
-        nonlocal next_sample
-        while next_sample < len(times) and times[next_sample] < t_limit:
-            if tracker.started:
-                e = tracker.estimate()
-                out_q[next_sample], out_var[next_sample] = e.positions, e.position_variances
-                out_b[next_sample], out_X[next_sample] = e.biases, e.X_CE
-                out_health[next_sample] = int(e.health.state)
-            next_sample += 1
-
-    for k, t in enumerate(run.reading_times_s):
-        while (next_image < len(image_order)
-               and run.image_arrival_times_s[image_order[next_image]] < t):
-            i = image_order[next_image]
-            sample_until(run.image_arrival_times_s[i])
-            frame = DepthFrame(float(run.image_capture_times_s[i]),
-                               float(run.image_arrival_times_s[i]), run.depth_images_m[i],
-                               int(i))
-            try:
-                tracker.add_image(frame)
-            except ValueError as err:
-                skipped_images += 1
-                warnings.warn("unusable images", f"image {i} captured at "
-                              f"{run.image_capture_times_s[i]:.4f} s skipped: {err}")
-            else:
-                if on_image is not None:
-                    on_image(tracker, frame)
-            next_image += 1
-            bar.update(1)
-        sample_until(t)
-        tracker.add_reading(float(t), run.readings_rad[k])
-    sample_until(np.inf)
-    bar.close()
+    counts = track_stream(run_events(run), tracker, total_images=len(
+        run.image_capture_times_s), progress=progress, observer=sampler, on_image=on_image)
     virtual = model.virtual_joint_indices
     return ReplayResult(
-        times_s=np.asarray(times), positions=out_q, position_variances=out_var, biases=out_b,
-        camera_offsets=out_q[:, virtual], X_CE=out_X, health=out_health,
-        joint_names=list(model.joint_names),
+        times_s=np.asarray(times), positions=sampler.q, position_variances=sampler.var,
+        biases=sampler.b, camera_offsets=sampler.q[:, virtual], X_CE=sampler.X,
+        health=sampler.health, joint_names=list(model.joint_names),
         num_images_applied=tracker.num_images_applied,
-        num_images_skipped=tracker.num_images_skipped + skipped_images,
+        num_images_skipped=tracker.num_images_skipped + sum(counts.source_skipped.values()),
         image_update_s=list(tracker.images.update.times.per_update) if tracker.images else [],
         wall_time_s=time.perf_counter() - t_start,
     )

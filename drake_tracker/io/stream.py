@@ -17,7 +17,7 @@ from __future__ import annotations
 import heapq
 import logging
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Protocol
 
@@ -77,6 +77,14 @@ class EstimateSink(Protocol):
         """Takes the estimate after one reading."""
 
 
+class StreamObserver(Protocol):
+    """Sees the tracker between events (``io/replay.py`` samples its estimate there)."""
+
+    def before(self, time_s: float, tracker: Tracker) -> None:
+        """Called before an event at ``time_s`` (a reading's stamp, an image's arrival)
+        is fed, and once at the end with ``inf``."""
+
+
 @dataclass
 class StreamCounts:
     """What a stream gave and what the tracker made of it (``report.json``)."""
@@ -107,14 +115,19 @@ class StreamCounts:
 
 def track_stream(events: Iterable[Event], tracker: Tracker,
                  sink: EstimateSink | None = None, total_images: int | None = None,
-                 progress: bool = False) -> StreamCounts:
+                 progress: bool = False, observer: StreamObserver | None = None,
+                 on_image: Callable[[Tracker, DepthFrame], None] | None = None
+                 ) -> StreamCounts:
     """Feeds ``events`` (arrival order) to ``tracker``; after each reading it used, the
     estimate goes to ``sink``. An image captured after the latest reading (a log that
     records it as it comes, before the reading that follows its capture) waits for that
     reading: the tracker places an image between readings, and would call it "from the
     future". An image the tracker cannot use (malformed, not in metres) is skipped with
-    a rate-limited warning and counted, as is every message the source skipped. Returns
-    the counts."""
+    a rate-limited warning and counted, as is every message the source skipped.
+    ``observer.before(t, tracker)`` runs before each event at time t; ``on_image(tracker,
+    frame)`` after each image the tracker took (applied or skipped; not one it raised
+    on); an exception it raises ends the stream and reaches the caller. Returns the
+    counts."""
     counts = StreamCounts()
     warnings = RateLimitedWarning(log)
     latest_reading_s = -np.inf
@@ -127,17 +140,24 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
                    if image.arrival_s is None or waited else image.arrival_s)
         frame = DepthFrame(float(image.capture_s), float(arrival), image.depth,
                            int(image.sequence))
+        if observer is not None:
+            observer.before(frame.arrival_time_s, tracker)
         try:
             tracker.add_image(frame)
         except ValueError as err:
             _count(counts.source_skipped, "unusable images")
             warnings.warn("unusable images", f"image {image.sequence} captured at "
                           f"{image.capture_s:.4f} s skipped: {err}")
+        else:
+            if on_image is not None:
+                on_image(tracker, frame)
 
     try:
         for event in events:
             if isinstance(event, ReadingEvent):
                 counts.readings += 1
+                if observer is not None:
+                    observer.before(event.time_s, tracker)
                 if tracker.add_reading(event.time_s, event.positions):
                     latest_reading_s = max(latest_reading_s, event.time_s)
                     while waiting and waiting[0].capture_s <= latest_reading_s:
@@ -156,6 +176,8 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
                 warnings.warn(event.kind, event.why)
         while waiting:  # no reading came after them: the tracker says why it skips them
             feed(waiting.popleft(), waited=True)
+        if observer is not None:
+            observer.before(np.inf, tracker)
     finally:
         bar.close()
     counts.images_applied = tracker.num_images_applied

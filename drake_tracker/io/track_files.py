@@ -45,7 +45,8 @@ def run_events(run: RecordedRun) -> Iterator[Event]:
     order, unplayable = run.images_in_arrival_order()
     for i in unplayable:
         yield SkippedMessage("images without an arrival time", f"image {i} skipped: its "
-                             f"arrival stamp is {float(run.image_arrival_times_s[i])!r}")
+                             f"arrival stamp is {float(run.image_arrival_times_s[i])!r}, "
+                             f"not a time")
     readings = ((float(t), ReadingEvent(float(t), q))
                 for t, q in zip(run.reading_times_s, run.readings_rad))
     images = ((float(run.image_arrival_times_s[i]),
