@@ -188,6 +188,15 @@ def test_bad_messages_are_skipped_and_counted(apollo, tmp_path):
                    m.joint_state(messages[5][2], ["other"], [0.0]))
     messages += [("/depth", "sensor_msgs/msg/Image", t0 + 50_000_000, rgb),
                  ("/depth", "sensor_msgs/msg/Image", t0 + 60_000_000, wrong_size)]
+    # A reading logged in order but stamped 25 ms back (a clock that jumped back), and
+    # one with a NaN joint (used: that joint is predicted).
+    back = t0 + 125_000_000
+    messages.append(("/joint_states", "sensor_msgs/msg/JointState", back,
+                     m.joint_state(back - 25_000_000, names, np.zeros(len(names)))))
+    nan_joint = np.zeros(len(names))
+    nan_joint[2] = np.nan
+    messages[9] = ("/joint_states", "sensor_msgs/msg/JointState", messages[9][2],
+                   m.joint_state(messages[9][2], names, nan_joint))
     messages.sort(key=lambda x: x[2])
     path = _write(tmp_path / "faults.mcap", messages)
     report = track_bag(BagSource(path, names), apollo, fast_params(), tmp_path / "out",
@@ -196,7 +205,9 @@ def test_bad_messages_are_skipped_and_counted(apollo, tmp_path):
     assert counts["source_skipped"] == {"joint messages without the model's joints": 1,
                                         "depth images not usable": 1,
                                         "unusable images": 1}
-    assert counts["readings"] == 19 and counts["estimates"] == 19
+    assert counts["readings"] == 20 and counts["estimates"] == 19
+    assert sum(counts["readings_skipped"].values()) == 1
+    assert counts["readings_with_missing_joints"] == 1
 
 
 def test_depth_encodings(tmp_path):
