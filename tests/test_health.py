@@ -86,15 +86,17 @@ def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
 def test_an_image_that_does_not_confirm_the_estimate_reports_uncertain_and_nothing_else():
     """``tracking_agreement``: an image that sees through none of the arm but agrees on
     too little of its unhidden pixels (an estimate centimetres off) reports
-    ``uncertain``; hidden pixels do not count against it; every other field is what the
-    see-through test alone (``tracking_agreement`` 0) gives."""
+    ``uncertain``, and so does the next one, which must confirm it again (two in a row,
+    as the state machine asks of ``tracking``); hidden pixels do not count against it;
+    every other field is what the see-through test alone (``tracking_agreement`` 0)
+    gives."""
     strict = HealthParams(min_robot_pixels=10, tracking_agreement=0.9)
     lenient = HealthParams(min_robot_pixels=10, tracking_agreement=0.0)
     close = ImageConsistency(0.0, 100, 0.95, 0.0)
     off = ImageConsistency(0.0, 100, 0.8, 0.0)  # 80 % agree, none seen through
     half_hidden = ImageConsistency(0.0, 100, 0.46, 0.0, occluded=0.5)  # 92 % of 50
     images = [close, close, off, off, half_hidden, close]
-    expected = ["U", "T", "U", "U", "T", "T"]
+    expected = ["U", "T", "U", "U", "U", "T"]
     a, b = TrackerHealth(), TrackerHealth()
     for k, (image, state) in enumerate(zip(images, expected)):
         image = ImageConsistency(0.1 * k, image.robot_pixels, image.agreement,
