@@ -104,6 +104,7 @@ class DelayBufferSystem(LeafSystem):
         self._frame = self.DeclareAbstractInputPort(
             "depth_frame", AbstractValue.Make(DepthFrame.empty()))
         state = {self.abstract_state_ticket(self._state)}
+        self._index = int(self._state)  # pydrake takes a plain int fastest
         self._reading_out = self.DeclareAbstractOutputPort(
             "reading", lambda: AbstractValue.Make(AdmittedReading()),
             lambda c, o: o.set_value(self.state(c).reading), state)
@@ -145,13 +146,13 @@ class DelayBufferSystem(LeafSystem):
 
     def state(self, context: Context) -> DelayBufferState:
         """The buffer, the gate, the clocks and the latest messages, in ``context``."""
-        return context.get_abstract_state(self._state).get_value()
+        return context.get_abstract_state(self._index).get_value()
 
     def _update(self, context: Context, state) -> EventStatus | None:
         s = self.state(context).copy()  # the stored one is shared with Drake's copies
         # Frames are judged against the buffer the CPF system saw (before this reading).
         changed = self._judge_frame(self._frame.Eval(context), s)
-        raw = float(self._time.Eval(context)[0])
+        raw = self._time.EvalBasicVector(context)[0]
         if s.readings.is_new(raw):
             changed = True
             self._take_reading(raw, self._position.Eval(context), s)  # Eval gives a copy
@@ -162,7 +163,7 @@ class DelayBufferSystem(LeafSystem):
             self._take_observation(message, s)
         if not changed:
             return EventStatus.DidNothing()  # Drake keeps the state as it is
-        state.get_mutable_abstract_state(self._state).set_value(s)
+        state.get_mutable_abstract_state(self._index).set_value(s)
         return None
 
     def _take_reading(self, raw: float, values: np.ndarray, s: DelayBufferState) -> None:

@@ -111,6 +111,7 @@ class JointKalmanBankSystem(LeafSystem):
         self._correction = self.DeclareAbstractInputPort(
             "correction", AbstractValue.Make(BeliefCorrection()))
         deps = {self.discrete_state_ticket(self._belief)}
+        self._groups = (int(self._belief), int(self._bookkeeping))  # plain ints: fastest
         self._outputs = {"belief": self.DeclareVectorOutputPort(
             "belief", 5 * n, lambda c, o: o.SetFromVector(self.belief(c).ravel()), deps)}
         for name, row in _ROWS.items():
@@ -141,12 +142,12 @@ class JointKalmanBankSystem(LeafSystem):
 
     def belief(self, context: Context) -> np.ndarray:
         """The (5, n) belief in ``context`` (zero configuration before the first reading)."""
-        return context.get_discrete_state().get_value(self._belief).reshape(5, self._n)
+        return context.get_discrete_state().get_value(self._groups[0]).reshape(5, self._n)
 
     def bookkeeping(self, context: Context) -> KalmanBankState:
         """The :class:`KalmanBankState` in ``context`` (a copy: changing it changes no state)."""
         return KalmanBankState.from_vector(
-            context.get_discrete_state().get_value(self._bookkeeping))
+            context.get_discrete_state().get_value(self._groups[1]))
 
     def _update(self, context: Context, discrete_state) -> EventStatus | None:
         s = self.bookkeeping(context)
@@ -168,8 +169,8 @@ class JointKalmanBankSystem(LeafSystem):
         if new_reading:
             s.reading_id = reading.id
             belief = self._filter(s, reading, belief)
-        discrete_state.set_value(self._belief, belief.ravel())
-        discrete_state.set_value(self._bookkeeping, s.to_vector())
+        discrete_state.set_value(self._groups[0], belief.ravel())
+        discrete_state.set_value(self._groups[1], s.to_vector())
         return None
 
     def _filter(self, s: KalmanBankState, reading: AdmittedReading,
