@@ -3,6 +3,7 @@ writes every documented key of bench.json, and its agreement figures hold. No ti
 asserted (performance is the bench's to measure, not the tests')."""
 
 import json
+import math
 
 from drake_tracker.cli.main import main
 
@@ -31,3 +32,15 @@ def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):
         assert robot["depth_p95_mm_vs_drake"] <= 10.0
     assert result["image_updates_per_s_2000_1_thread"] > 0
     assert result["demo"]["real_time_factor"] > 0
+
+
+def test_the_bench_command_runs_the_reading_path_alone(tmp_path, capsys):
+    assert main(["bench", "--quick", "--only", "readings", "--out", str(tmp_path)]) == 0
+    assert "each joint reading in a Diagram" in capsys.readouterr().out
+    result = json.loads((tmp_path / "bench.json").read_text())
+    assert list(result) == ["reading_path"]
+    figures = result["reading_path"]
+    for key in ("us_per_reading", "bank_us_per_reading", "buffer_us_per_reading",
+                "source_us_per_reading"):
+        assert math.isfinite(figures[key]), key  # no time asserted
+    assert figures["last_reading_filtered_s"] >= figures["duration_s"] - 0.01

@@ -207,3 +207,39 @@ def test_the_bank_is_consistent_nees_within_the_chi2_bounds():
     assert 0.93 <= np.mean(inside[10:]) <= 0.97, np.mean(inside[10:])
     assert min(inside[10:]) >= 0.92
     assert 1.9 <= np.mean(means[10:]) <= 2.1, np.mean(means[10:])
+
+
+def test_check_reading_answers_as_its_plain_numpy_reference():
+    """``check_reading`` takes one Python sum for an all-finite reading; against the plain
+    numpy checks (no value at all, an infinite value; NaN allowed), on seeded readings
+    with NaN, ±inf, huge values whose sum overflows, and lists."""
+    rng = np.random.default_rng(21)
+    n = 5
+    params = KalmanBankParams(np.full(n, 1e-3), np.ones(n), np.full(n, 1e-3),
+                              np.full(n, 0.9), np.ones(n, bool))
+    bank = JointKalmanBank(params)
+
+    def reference(reading):
+        reading = np.asarray(reading, dtype=float)
+        if np.isinf(reading).any():
+            return "infinite"
+        if np.isnan(reading).all() and reading.size:
+            return "no value"
+        return reading
+
+    for _ in range(2000):
+        reading = rng.normal(0.0, 1.0, n)
+        kinds = rng.integers(0, 8, n)
+        reading[kinds == 0] = np.nan
+        reading[kinds == 1] = np.inf
+        reading[kinds == 2] = -np.inf
+        reading[kinds == 3] = 1e308
+        if rng.random() < 0.1:
+            reading[:] = np.nan
+        given = reading.tolist() if rng.random() < 0.2 else reading
+        expected = reference(given)
+        if isinstance(expected, str):
+            with pytest.raises(ValueError, match=expected):
+                bank.check_reading(given)
+        else:
+            np.testing.assert_array_equal(bank.check_reading(given), expected)

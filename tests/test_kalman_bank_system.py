@@ -89,3 +89,31 @@ def test_kalman_bank_system_adopts_a_correction_once_and_restarts(apollo):
     expected = bank.step(start, 0.0, full_reading(resolved, reading))
     np.testing.assert_allclose(system.belief(context), expected, rtol=0, atol=1e-12)
     assert system.bookkeeping(context).last_reading_s == 5.0
+
+
+def test_the_bank_reads_its_correction_port_when_the_reading_tells_of_a_new_one(apollo):
+    """A reading that carries the buffer's latest correction id spares the correction
+    port while that id is not newer than the bank's; republished with a newer id (the
+    buffer applied an image), the correction is adopted."""
+    system = JointKalmanBankSystem(model=apollo, params=params(), period_s=0.01)
+    context = system.CreateDefaultContext()
+    n, n_robot = apollo.num_joints, len(apollo.robot_joint_names)
+    corrected = np.zeros((5, n))
+    corrected[MEAN_A], corrected[2] = 0.123, 1e-4
+    system.get_correction_input_port().FixValue(context, BeliefCorrection(1, 0.0, 0.0,
+                                                                          corrected))
+    reading = np.full(n_robot, 0.5)
+    system.get_reading_input_port().FixValue(
+        context, AdmittedReading(1, 0.0, reading, correction_id=0))
+    simulator = Simulator(system, context)
+    simulator.AdvanceTo(0.005)
+    assert system.bookkeeping(context).correction_id == 0  # the port was not read
+    resolved = resolve_tracker_params(params(), apollo)
+    bank, start = new_bank_and_belief(resolved, reading)
+    np.testing.assert_array_equal(system.belief(context),
+                                  bank.step(start, 0.0, full_reading(resolved, reading)))
+    system.get_reading_input_port().FixValue(
+        context, AdmittedReading(1, 0.0, reading, correction_id=1))
+    simulator.AdvanceTo(0.015)
+    assert system.bookkeeping(context).correction_id == 1
+    np.testing.assert_array_equal(system.belief(context), corrected)

@@ -65,3 +65,21 @@ def test_the_source_shows_what_a_direct_lookup_in_the_recording_says(run):
     for t in (0.31, 0.35, 0.4):
         context.SetTime(t)
         assert source.GetOutputPort("depth_frame").Eval(context) is first
+
+
+def test_latest_at_or_before_answers_as_numpy_searchsorted():
+    """The source's incremental lookup against its plain reference, on sorted times with
+    repeats, unsorted times and NaN, asked forwards by small and large steps, backwards
+    and at the same time again."""
+    from drake_tracker.systems.recorded_run_source import LatestAtOrBefore
+
+    rng = np.random.default_rng(5)
+    sorted_times = np.sort(np.round(rng.uniform(0.0, 1.0, 200), 2))  # many repeats
+    cases = [sorted_times, rng.uniform(0.0, 1.0, 50), np.array([0.1, np.nan, 0.3]),
+             np.array([]), np.array([0.5])]
+    for times in cases:
+        lookup = LatestAtOrBefore(times)
+        queries = np.concatenate([np.arange(-0.05, 1.05, 0.003), [0.5, 0.5, 0.2, 2.0, -1.0],
+                                  rng.uniform(-0.1, 1.1, 300), sorted_times])
+        for t in queries.tolist():
+            assert lookup(t) == int(np.searchsorted(times, t, side="right")) - 1, (times, t)

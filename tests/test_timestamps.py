@@ -4,6 +4,7 @@ readings, each in the offline tracker and in the Diagram (the policy alone:
 test_timestamp_policy.py)."""
 
 import logging
+from collections import Counter
 from dataclasses import replace
 
 import numpy as np
@@ -254,3 +255,36 @@ def test_median_is_numpys_median_bit_for_bit():
             window = deque(values.tolist(), maxlen=RECENT_GAPS)
             assert median(window) == float(np.median(window))
     assert np.isnan(median([1.0, float("nan"), 2.0]))
+
+
+def test_the_usual_samples_fast_path_decides_as_the_full_check():
+    """``StreamClock.check`` takes ``accept_usual`` for the usual sample; against the
+    plain reference (every stamp after the first through ``_checked``, which the fast
+    path skips), on seeded stamps with repeats, glitches, steps back and NaN: the same
+    decisions and the same clock after each."""
+    from drake_tracker.core.sensors.timestamps import StreamClock
+
+    rng = np.random.default_rng(12)
+    stamps = np.cumsum(rng.choice([0.001, 0.001, 0.002, 0.0, 0.0005], 3000))
+    faults = rng.integers(0, len(stamps), 60)
+    stamps[faults[:20]] += 1000.0
+    stamps[faults[20:40]] -= 0.5
+    stamps[faults[40:50]] = np.nan
+    stamps[1500:1520] -= 2.0  # a step back that stays long enough to re-anchor
+    stamps[2000:] += 5.0  # a step forward for good
+    fast, plain = StreamClock("joint reading", TimestampParams()), StreamClock(
+        "joint reading", TimestampParams())
+    kinds = Counter()
+    for raw in stamps.tolist():
+        if plain.latest_s is None and raw == raw:
+            expected = plain._accept(raw)
+        elif raw != raw:
+            expected = plain.check(raw)  # not finite: rejected before either path
+        else:
+            expected = plain._checked(raw)
+        decision = fast.check(raw)
+        assert decision == expected, raw
+        assert fast.__dict__ == plain.__dict__, raw
+        kinds[decision.kind or ("re-anchored" if decision.reanchored_by_s else "usual")] += 1
+    assert kinds["usual"] > 2000 and kinds["re-anchored"] >= 1, kinds
+    assert kinds["stamps far in the future"] and kinds["stamps behind the latest"], kinds

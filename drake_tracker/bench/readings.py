@@ -30,6 +30,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 
+from drake_tracker.robot.model import build_tracker_model
 from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
 from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
 from drake_tracker.systems.messages import ImageObservationMessage
@@ -39,6 +40,7 @@ if TYPE_CHECKING:
     from drake_tracker.io.recording import RecordedRun
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
+    from drake_tracker.sim.scenario.load import Scenario
 
 #: Simulated seconds before the timing starts (the first readings build the belief).
 WARM_UP_S = 0.5
@@ -120,6 +122,30 @@ def bench_reading_path(run: RecordedRun, model: TrackerModel, params: TrackerPar
             "buffer_us_per_reading": best["buffer"],
             "source_us_per_reading": best["source"], "last_reading_filtered_s": latest,
             "duration_s": run.duration_s, "repeats": max(1, repeats)}
+
+
+def record_demo_sensors(params: TrackerParams, duration_s: float) -> tuple[Scenario,
+                                                                         RecordedRun]:
+    """The demo's scenario (camera rendering what the tracker reads) and its sensors
+    recorded over the first ``duration_s``, for the benches that replay them."""
+    from drake_tracker.demo.run import DEFAULT_SCENARIO, render_what_the_tracker_reads
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario.load import load_scenario
+
+    scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
+    return scenario, simulate_and_record(scenario, duration_s=duration_s,
+                                         image_stride=scenario.camera.render_stride,
+                                         validate=False)
+
+
+def bench_recorded_reading_path(params: TrackerParams,
+                                recording: tuple[Scenario, RecordedRun],
+                                quick: bool = False) -> dict:
+    """:func:`bench_reading_path` on :func:`record_demo_sensors`'s recording, as
+    ``drake-tracker bench`` runs it (2 repeats with ``quick``, else 3)."""
+    scenario, run = recording
+    return bench_reading_path(run, build_tracker_model(scenario.resolved_robot_config()),
+                              params, 1.0 / scenario.encoders.rate_hz, 2 if quick else 3)
 
 
 def format_reading_path(result: dict) -> str:

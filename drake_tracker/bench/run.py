@@ -55,7 +55,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.bench.readings import bench_reading_path, format_reading_path
+from drake_tracker.bench.readings import (
+    bench_recorded_reading_path,
+    format_reading_path,
+    record_demo_sensors,
+)
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.filter.angle_observation import AngleObservation
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
@@ -167,20 +171,6 @@ def bench_demo(params: TrackerParams, duration_s: float) -> dict:
             "real_time_factor_cpu": run.duration_s / (cpu_end - marks[0][3])}
 
 
-def record_demo_sensors(params: TrackerParams, duration_s: float) -> tuple[Scenario,
-                                                                         RecordedRun]:
-    """The demo's scenario (camera rendering what the tracker reads) and its sensors
-    recorded over the first ``duration_s``, for the benches that replay them."""
-    from drake_tracker.demo.run import DEFAULT_SCENARIO, render_what_the_tracker_reads
-    from drake_tracker.sim.record import simulate_and_record
-    from drake_tracker.sim.scenario.load import load_scenario
-
-    scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
-    return scenario, simulate_and_record(scenario, duration_s=duration_s,
-                                         image_stride=scenario.camera.render_stride,
-                                         validate=False)
-
-
 def bench_tracker_alone(params: TrackerParams, duration_s: float,
                         recording: tuple[Scenario, RecordedRun] | None = None) -> dict:
     """The tracker's Diagram alone on the demo's recorded sensors (see the module doc);
@@ -247,10 +237,7 @@ def run_benchmarks(quick: bool = False) -> dict:
     demo = bench_demo(params, 2.0 if quick else 4.0)
     recording = record_demo_sensors(params, 3.0 if quick else 6.0)
     alone = bench_tracker_alone(params, recording[1].duration_s, recording)
-    readings = bench_reading_path(recording[1],
-                                  build_tracker_model(recording[0].resolved_robot_config()),
-                                  params, 1.0 / recording[0].encoders.rate_hz,
-                                  2 if quick else 3)
+    readings = bench_recorded_reading_path(params, recording, quick)
     bench, cad = results["apollo"], results["apollo_cad"]
     size = camera.subsampled(bench_stride(camera, params))
     return {
@@ -384,9 +371,18 @@ def format_tracker_alone(alone: dict) -> str:
 
 def run_bench(args: argparse.Namespace) -> int:
     """``drake-tracker bench``: runs :func:`run_benchmarks` (fewer repetitions with
-    ``--quick``), prints the figures and writes them to ``OUT/bench.json``; returns 0."""
-    result = run_benchmarks(quick=getattr(args, "quick", False))
-    print(format_bench(result))
+    ``--quick``; with ``--only readings`` the reading path alone, ``bench.json`` then
+    holding ``reading_path`` only), prints the figures and writes them to
+    ``OUT/bench.json``; returns 0."""
+    quick = getattr(args, "quick", False)
+    if getattr(args, "only", None) == "readings":
+        params = TrackerParams()
+        result = {"reading_path": bench_recorded_reading_path(
+            params, record_demo_sensors(params, 3.0 if quick else 6.0), quick)}
+        print(format_reading_path(result["reading_path"]))
+    else:
+        result = run_benchmarks(quick=quick)
+        print(format_bench(result))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench.json").write_text(json.dumps(result, indent=2))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -50,6 +50,9 @@ class DelayBufferState(SharedAbstractState):
     image_clock: StreamClock | None = None
     frame_key: tuple = ()
     frame_decision: StampDecision | None = None
+    #: The frame judged last (the object: the port holds the same one until a new
+    #: frame, and a DepthFrame is never changed in place).
+    judged_frame: DepthFrame | None = None
 
 
 def frame_key(frame: DepthFrame) -> tuple:
@@ -101,6 +104,7 @@ class DelayBufferSystem(LeafSystem):
         self._frame = self.DeclareAbstractInputPort(
             "depth_frame", AbstractValue.Make(DepthFrame.empty()))
         state = {self.abstract_state_ticket(self._state)}
+        self._index = int(self._state)  # pydrake takes a plain int fastest
         self._reading_out = self.DeclareAbstractOutputPort(
             "reading", lambda: AbstractValue.Make(AdmittedReading()),
             lambda c, o: o.set_value(self.state(c).reading), state)
@@ -142,16 +146,16 @@ class DelayBufferSystem(LeafSystem):
 
     def state(self, context: Context) -> DelayBufferState:
         """The buffer, the gate, the clocks and the latest messages, in ``context``."""
-        return context.get_abstract_state(self._state).get_value()
+        return context.get_abstract_state(self._index).get_value()
 
     def _update(self, context: Context, state) -> EventStatus | None:
         s = self.state(context).copy()  # the stored one is shared with Drake's copies
         # Frames are judged against the buffer the CPF system saw (before this reading).
         changed = self._judge_frame(self._frame.Eval(context), s)
-        raw = float(self._time.Eval(context)[0])
+        raw = self._time.EvalBasicVector(context)[0]
         if s.readings.is_new(raw):
             changed = True
-            self._take_reading(raw, np.array(self._position.Eval(context), float), s)
+            self._take_reading(raw, self._position.Eval(context), s)  # Eval gives a copy
         message = self._observation.Eval(context)
         if message.id > s.last_observation_id and message.observation is not None:
             changed = True
@@ -159,7 +163,7 @@ class DelayBufferSystem(LeafSystem):
             self._take_observation(message, s)
         if not changed:
             return EventStatus.DidNothing()  # Drake keeps the state as it is
-        state.get_mutable_abstract_state(self._state).set_value(s)
+        state.get_mutable_abstract_state(self._index).set_value(s)
         return None
 
     def _take_reading(self, raw: float, values: np.ndarray, s: DelayBufferState) -> None:
@@ -184,7 +188,7 @@ class DelayBufferSystem(LeafSystem):
             s.buffer = s.buffer.copy()
         s.buffer.add_reading(t, full_reading(p, values))
         s.last_reading_time_s = t
-        s.reading = AdmittedReading(s.reading.id + 1, t, values, restarted)
+        s.reading = AdmittedReading(s.reading.id + 1, t, values, restarted, s.correction.id)
 
     def _take_observation(self, message: ImageObservationMessage, s: DelayBufferState) -> None:
         """Step 6: an image's observation into the buffer at its anchor."""
@@ -198,12 +202,16 @@ class DelayBufferSystem(LeafSystem):
         now, belief = s.buffer.present()
         s.correction = BeliefCorrection(s.correction.id + 1, now, s.last_reading_time_s,
                                         belief)
+        s.reading = replace(s.reading, correction_id=s.correction.id)  # the bank looks
 
     def _judge_frame(self, frame: DepthFrame, s: DelayBufferState) -> bool:
         """Step 1, once per new frame; whether there was one."""
-        if frame.is_empty or s.buffer is None or frame_key(frame) == s.frame_key:
+        if frame is s.judged_frame or frame.is_empty or s.buffer is None:
             return False
-        s.frame_key = frame_key(frame)
+        key = frame_key(frame)
+        if key == s.frame_key:
+            return False
+        s.frame_key, s.judged_frame = key, frame
         s.image_clock = s.image_clock.copy()
         s.frame_decision = judge_stamp(frame, s.image_clock, s.buffer, s.readings.clock,
                                        self._params, log)

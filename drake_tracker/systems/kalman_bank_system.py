@@ -49,15 +49,16 @@ class KalmanBankState:
 
     def to_vector(self) -> np.ndarray:
         """The numbers of the discrete state group (NaN for None)."""
-        return np.array([np.nan if v is None else v for v in (self.time_s, self.last_reading_s)]
-                        + [self.correction_id, self.reading_id], float)
+        return np.array((np.nan if self.time_s is None else self.time_s,
+                         np.nan if self.last_reading_s is None else self.last_reading_s,
+                         self.correction_id, self.reading_id), float)
 
     @staticmethod
     def from_vector(x: np.ndarray) -> KalmanBankState:
         """The state that :meth:`to_vector` gave ``x``."""
         time_s, last_reading_s, correction_id, reading_id = x.tolist()
-        return KalmanBankState(None if np.isnan(time_s) else time_s,
-                               None if np.isnan(last_reading_s) else last_reading_s,
+        return KalmanBankState(None if time_s != time_s else time_s,  # NaN: None
+                               None if last_reading_s != last_reading_s else last_reading_s,
                                int(correction_id), int(reading_id))
 
 
@@ -110,6 +111,7 @@ class JointKalmanBankSystem(LeafSystem):
         self._correction = self.DeclareAbstractInputPort(
             "correction", AbstractValue.Make(BeliefCorrection()))
         deps = {self.discrete_state_ticket(self._belief)}
+        self._groups = (int(self._belief), int(self._bookkeeping))  # plain ints: fastest
         self._outputs = {"belief": self.DeclareVectorOutputPort(
             "belief", 5 * n, lambda c, o: o.SetFromVector(self.belief(c).ravel()), deps)}
         for name, row in _ROWS.items():
@@ -140,17 +142,22 @@ class JointKalmanBankSystem(LeafSystem):
 
     def belief(self, context: Context) -> np.ndarray:
         """The (5, n) belief in ``context`` (zero configuration before the first reading)."""
-        return context.get_discrete_state(self._belief).get_value().reshape(5, self._n)
+        return context.get_discrete_state().get_value(self._groups[0]).reshape(5, self._n)
 
     def bookkeeping(self, context: Context) -> KalmanBankState:
         """The :class:`KalmanBankState` in ``context`` (a copy: changing it changes no state)."""
         return KalmanBankState.from_vector(
-            context.get_discrete_state(self._bookkeeping).get_value())
+            context.get_discrete_state().get_value(self._groups[1]))
 
     def _update(self, context: Context, discrete_state) -> EventStatus | None:
         s = self.bookkeeping(context)
-        correction, reading = self._correction.Eval(context), self._reading.Eval(context)
-        adopt = correction.id > s.correction_id and correction.belief is not None
+        reading = self._reading.Eval(context)
+        adopt = False
+        if reading.correction_id is None or reading.correction_id > s.correction_id:
+            # The buffer tells the id of its latest correction with each reading: the
+            # correction port is read only when there is a new one (or no word of it).
+            correction = self._correction.Eval(context)
+            adopt = correction.id > s.correction_id and correction.belief is not None
         new_reading = self._params.use_joint_readings and reading.id > s.reading_id
         if not (adopt or new_reading):
             return EventStatus.DidNothing()  # Drake keeps the state as it is
@@ -162,8 +169,8 @@ class JointKalmanBankSystem(LeafSystem):
         if new_reading:
             s.reading_id = reading.id
             belief = self._filter(s, reading, belief)
-        discrete_state.get_mutable_vector(self._belief).SetFromVector(belief.ravel())
-        discrete_state.get_mutable_vector(self._bookkeeping).SetFromVector(s.to_vector())
+        discrete_state.set_value(self._groups[0], belief.ravel())
+        discrete_state.set_value(self._groups[1], s.to_vector())
         return None
 
     def _filter(self, s: KalmanBankState, reading: AdmittedReading,

@@ -55,9 +55,15 @@ class AdmittedReading:
     """The latest joint reading the delay buffer's gate admitted (id 0: none yet): its
     time in the tracker's time base and its values; ``restarted`` when the readings'
     clock restarted at it (the estimate starts again from it). The Kalman bank filters
-    each new one, so the readings pass one gate."""
+    each new one, so the readings pass one gate.
+
+    ``correction_id`` is the id of the buffer's latest :class:`BeliefCorrection` (on its
+    ``correction`` port) when it published this, kept up to date when it applies an
+    image: the bank reads its correction port only when that is newer than the
+    correction it holds, or None (no word of it: it reads the port every time)."""
 
     id: int = 0
     time_s: float = float("nan")
     values: np.ndarray | None = None
     restarted: bool = False
+    correction_id: int | None = None

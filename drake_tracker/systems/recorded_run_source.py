@@ -14,6 +14,39 @@ from drake_tracker.io.recording import RecordedRun
 log = logging.getLogger(__name__)
 
 
+class LatestAtOrBefore:
+    """``int(np.searchsorted(times, t, side="right")) - 1`` (the latest index at or before
+    ``t``, -1 before the first) for fixed ``times``, from the previous answer when the
+    times are sorted and ``t`` moved on by at most one of them: the Simulator asks at
+    every step, one sample on (a binary search costs microseconds in numpy)."""
+
+    def __init__(self, times: np.ndarray):
+        self._times = np.asarray(times, float)
+        self._list = self._times.tolist()
+        #: NaN anywhere makes this False: then every answer is numpy's.
+        self._sorted = bool(np.all(self._times[1:] >= self._times[:-1]))
+        self._at, self._k = float("nan"), -1
+
+    def __call__(self, t: float) -> int:
+        """The latest index whose time is at or before ``t`` (-1 for none)."""
+        if t == self._at:
+            return self._k
+        k, times = self._k, self._list
+        if self._sorted and (k < 0 or times[k] <= t):
+            end = min(k + 4, len(times))  # a few samples on; further, a binary search
+            while k + 1 < end and times[k + 1] <= t:
+                k += 1
+            if k + 1 < len(times) and times[k + 1] <= t:
+                k = self._search(t)
+        else:
+            k = self._search(t)
+        self._at, self._k = t, k
+        return k
+
+    def _search(self, t: float) -> int:
+        return int(np.searchsorted(self._times, t, side="right")) - 1
+
+
 class RecordedRunSource(LeafSystem):
     """Outputs, at time t, the latest reading stamped at or before t and the latest image
     that arrived at or before t, so a Diagram sees what the live sensors would show.
@@ -52,15 +85,9 @@ class RecordedRunSource(LeafSystem):
         # The outputs are functions of time alone: the latest lookups are kept (the
         # three ports are read at every step, at the same time), and each image's
         # DepthFrame is made once, when it is first shown.
-        self._reading_at = (float("nan"), -1)
+        self._latest_reading = LatestAtOrBefore(run.reading_times_s)
+        self._latest_arrival = LatestAtOrBefore(self._arrivals)
         self._frame_at = (-1, DepthFrame.empty())
-
-    def _latest_reading(self, t: float) -> int:
-        at, k = self._reading_at
-        if t != at:
-            k = int(np.searchsorted(self._run.reading_times_s, t, side="right")) - 1
-            self._reading_at = (t, k)
-        return k
 
     def _calc_position(self, context, output: BasicVector):
         k = self._latest_reading(context.get_time())
@@ -71,7 +98,7 @@ class RecordedRunSource(LeafSystem):
         output.SetAtIndex(0, self._run.reading_times_s[k] if k >= 0 else -1.0)
 
     def _calc_frame(self, context, output):
-        j = int(np.searchsorted(self._arrivals, context.get_time(), side="right")) - 1
+        j = self._latest_arrival(context.get_time())
         if j != self._frame_at[0]:
             self._frame_at = (j, self._frame(j))
         output.set_value(self._frame_at[1])

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import bisect
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -39,7 +40,7 @@ class StaleReadingError(ValueError):
     """A joint reading whose time stamp is not after the previous reading's."""
 
 
-@dataclass
+@dataclass(slots=True)
 class _Event:
     time_s: float
     reading: np.ndarray | None = None
@@ -171,20 +172,21 @@ class BeliefBuffer:
 
     def add_reading(self, t: float, reading: np.ndarray) -> np.ndarray:
         """Filters a reading stamped ``t`` (after every earlier one); returns the new belief."""
-        if not np.isfinite(t):
+        if not math.isfinite(t):
             raise ValueError(f"joint reading time stamp is not finite: {t}")
         if t <= self._last_reading_time:
             raise StaleReadingError(
                 f"joint reading stamped {t} s is not after the previous one "
                 f"({self._last_reading_time} s)")
+        t = float(t)
         reading = self.bank.check_reading(reading).copy()
         k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
-        k = self._insert(k, _Event(float(t), reading=reading),
+        k = self._insert(k, _Event(t, reading=reading),
                          self.bank.step_unchecked(belief, float(t - t0), reading))
-        self._last_reading_time = float(t)
+        self._last_reading_time = t
         if k < self._end - 1:
             self._replay_from(k + 1)
-        self._now = max(self._now, float(t))
+        self._now = max(self._now, t)
         self._prune()
         return self._log.beliefs[self._end - 1]
 

@@ -13,6 +13,7 @@ A joint without bias has ``σb = 0`` and starts with zero bias variance, so its 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -174,6 +175,8 @@ class JointKalmanBank:
         if reading.shape != (self.num_joints,):
             raise ValueError(
                 f"joint reading has shape {reading.shape}, expected ({self.num_joints},)")
+        if reading.size and math.isfinite(sum(reading.tolist())):
+            return reading  # every value finite (a NaN or ±inf would make the sum one)
         if np.isinf(reading).any():
             bad = [self.params.names[i] if self.params.names else str(i)
                    for i in np.flatnonzero(np.isinf(reading))]

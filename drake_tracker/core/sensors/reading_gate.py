@@ -45,7 +45,9 @@ class ReadingGate:
                  logger: logging.Logger | None = _log):
         self.clock = StreamClock("joint reading", params)
         self.joint_names = list(joint_names)
-        self.warnings = RateLimitedWarning(logger or _log, enabled=logger is not None)
+        self._warnings = RateLimitedWarning(logger or _log, enabled=logger is not None)
+        #: Whether a copy shares ``_warnings`` (then the first use copies them).
+        self._shared_warnings = False
         self.logger = logger
         self.last_raw_s = float("nan")
         self.gap_start_s: float | None = None
@@ -59,9 +61,21 @@ class ReadingGate:
         #: (``StampDecision.restarted``): the caller restarts its belief from it.
         self.restarted = False
 
+    @property
+    def warnings(self) -> RateLimitedWarning:
+        """The gate's rate-limited warnings and their counts (its own: the first use after
+        a copy copies them)."""
+        if self._shared_warnings:
+            self._warnings, self._shared_warnings = self._warnings.copy(), False
+        return self._warnings
+
     def copy(self) -> ReadingGate:
-        """An independent copy that shares the logger and joint names (see StreamClock's)."""
-        return self._with(self.clock.copy(), self.warnings.copy())
+        """An independent copy that shares the logger and joint names (see StreamClock's),
+        and its warnings until either uses them (they change only on a problem): the
+        delay buffer's LeafSystem copies its gate at every reading."""
+        clone = self._with(self.clock.copy(), self._warnings)
+        self._shared_warnings = clone._shared_warnings = True
+        return clone
 
     def __deepcopy__(self, memo) -> ReadingGate:
         return self._with(copy.deepcopy(self.clock, memo), copy.deepcopy(self.warnings, memo))
@@ -69,7 +83,7 @@ class ReadingGate:
     def _with(self, clock: StreamClock, warnings: RateLimitedWarning) -> ReadingGate:
         clone = object.__new__(ReadingGate)
         clone.__dict__.update(self.__dict__)
-        clone.clock, clone.warnings = clock, warnings
+        clone.clock, clone._warnings, clone._shared_warnings = clock, warnings, False
         return clone
 
     def is_new(self, raw_s: float) -> bool:
@@ -82,7 +96,8 @@ class ReadingGate:
         with NaN for them (``values``; those joints are predicted, the others filtered),
         with one warning per run of such readings; with none usable it is skipped (an
         encoder gap: one warning when it starts)."""
-        self.last_raw_s = float(raw_s)
+        raw_s = float(raw_s)
+        self.last_raw_s = raw_s
         self.restarted = False
         self.values = values = np.asarray(values, float)
         # NaN, ±inf, absurd values: a plain loop over the few joints is the fast check.
@@ -106,21 +121,24 @@ class ReadingGate:
                 self.gap_readings += 1
                 self.warnings.count("non-finite readings")
                 return None
-        decision = self.clock.check(raw_s)
-        if decision.time_s is None:
-            self.warnings.warn(decision.kind, f"joint reading skipped: {decision.problem}")
-            return None
-        self.restarted = decision.restarted
-        if decision.restarted and self.logger:
-            self.logger.warning("joint reading clock restarted at %.4f s: the few stamps "
-                                "accepted before were not followed by the stream; the "
-                                "estimate restarts from this reading", raw_s)
+        decision = None
+        t = self.clock.accept_usual(raw_s)  # the usual sample: no StampDecision made
+        if t is None:
+            decision = self.clock.check(raw_s)
+            if decision.time_s is None:
+                self.warnings.warn(decision.kind, f"joint reading skipped: {decision.problem}")
+                return None
+            t, self.restarted = decision.time_s, decision.restarted
+            if decision.restarted and self.logger:
+                self.logger.warning("joint reading clock restarted at %.4f s: the few "
+                                    "stamps accepted before were not followed by the "
+                                    "stream; the estimate restarts from this reading", raw_s)
         if self.gap_start_s is not None:
             if self.logger:
                 self.logger.info("joint readings finite again at %.4f s after %d skipped "
                                  "from %.4f s", raw_s, self.gap_readings, self.gap_start_s)
             self.gap_start_s, self.gap_readings = None, 0
-        if decision.reanchored_by_s is not None and self.logger:
+        if decision is not None and decision.reanchored_by_s is not None and self.logger:
             log_reanchor(self.logger, "joint reading", decision, raw_s, self.clock)
         if partial != self.missing:
             if partial and self.logger:
@@ -136,4 +154,4 @@ class ReadingGate:
             self.missing = partial
         if partial:
             self.warnings.count("readings with missing joints")
-        return decision.time_s
+        return t

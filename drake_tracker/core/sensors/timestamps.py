@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -56,6 +55,12 @@ def median(values: Iterable[float]) -> float:
         return float("nan")
     m = n // 2
     return float(ordered[m]) if n % 2 else (ordered[m - 1] + ordered[m]) / 2
+
+
+def _appended(recent: tuple[float, ...], value: float) -> tuple[float, ...]:
+    """``recent`` with ``value`` appended, the oldest dropped past ``RECENT_GAPS``: a
+    tuple, which a copy of the clock shares until it appends."""
+    return (*recent[1 - RECENT_GAPS:], value)
 
 
 @dataclass(frozen=True)
@@ -95,23 +100,23 @@ class StreamClock:
         #: The shift of the latest re-anchoring (s; 0 before any).
         self.last_shift_s = 0.0
         self.latest_s: float | None = None
-        self._gaps: deque[float] = deque(maxlen=RECENT_GAPS)
+        #: The latest accepted gaps and lags (at most ``RECENT_GAPS``; tuples, shared
+        #: by copies: a new one at each append).
+        self._gaps: tuple[float, ...] = ()
         self._run_count = 0
         self._run_first_raw = 0.0
         self._run_last_raw = 0.0
-        self._lags: deque[float] = deque(maxlen=RECENT_GAPS)
+        self._lags: tuple[float, ...] = ()
         self._accepted = 0
         self._lag_run_count = 0
         self._lag_run_first = 0.0
 
     def copy(self) -> StreamClock:
-        """An independent copy that shares the (immutable) parameters and name: the
-        tracker's systems copy their clocks at every sample, 1000 times a simulated
-        second."""
+        """An independent copy that shares the (immutable) parameters, name and recent
+        gaps and lags (tuples): the tracker's systems copy their clocks at every sample,
+        1000 times a simulated second."""
         clone = object.__new__(StreamClock)
         clone.__dict__.update(self.__dict__)
-        clone._gaps = self._gaps.copy()
-        clone._lags = self._lags.copy()
         return clone
 
     def __deepcopy__(self, memo) -> StreamClock:
@@ -146,12 +151,27 @@ class StreamClock:
             return StampDecision(None, f"its time stamp {raw} is not finite", "non-finite stamps")
         if self.latest_s is None:
             return self._accept(raw)
-        if 0 < raw + self.offset_s - self.latest_s <= self.params.min_future_jump_s:
-            # The usual sample: after the latest, and within the least future limit
-            # (``future_limit_s`` is never below it), so ``_checked`` would accept it;
-            # this spares the median of the recent gaps at every sample.
-            return self._accept(raw)
-        return self._checked(raw)
+        t = self.accept_usual(raw)
+        return self._checked(raw) if t is None else StampDecision(t)
+
+    def accept_usual(self, raw_s: float) -> float | None:
+        """The usual sample: a stamp after the latest accepted one and within the least
+        future limit (``future_limit_s`` is never below it), which :meth:`check` accepts
+        without the median of the recent gaps; accepts it as :meth:`check` would and
+        returns its time. None, with nothing changed, for any other stamp (then
+        :meth:`check` decides): the readings' gate takes this first at every sample,
+        1000 times a simulated second."""
+        latest = self.latest_s
+        if latest is None:
+            return None
+        t = raw_s + self.offset_s
+        if not 0 < t - latest <= self.params.min_future_jump_s:  # NaN too
+            return None
+        self._gaps = _appended(self._gaps, t - latest)
+        self.latest_s = t
+        self._run_count = 0
+        self._accepted += 1
+        return t
 
     def _checked(self, raw: float) -> StampDecision:
         """:meth:`check`'s decision for a finite stamp after the first, in full."""
@@ -188,7 +208,7 @@ class StreamClock:
         whatever the phase at which the lags were measured."""
         lag = time_s - reference_s
         if not rejected:
-            self._lags.append(lag)
+            self._lags = _appended(self._lags, lag)
             self._lag_run_count = 0
             return None
         if self.typical_lag_s is None:
@@ -211,7 +231,7 @@ class StreamClock:
     def _accept(self, raw: float, reanchored_by: float | None = None) -> StampDecision:
         t = raw + self.offset_s
         if self.latest_s is not None and t > self.latest_s:
-            self._gaps.append(t - self.latest_s)
+            self._gaps = _appended(self._gaps, t - self.latest_s)
         self.latest_s = t if self.latest_s is None else max(self.latest_s, t)
         self._run_count = 0
         self._accepted += 1
@@ -230,8 +250,7 @@ class StreamClock:
             return StampDecision(None, problem, kind)
         if self._accepted < self.params.reanchor_after_samples:
             # Fewer stamps than this run were accepted before it: they were the outliers.
-            self.latest_s, self._accepted = None, 0
-            self._gaps.clear()
+            self.latest_s, self._accepted, self._gaps = None, 0, ()
             return StampDecision(self._accept(raw).time_s, restarted=True)
         new_offset = self.latest_s + self.recent_period_s - self._run_first_raw
         shift = new_offset - self.offset_s
