@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -171,6 +172,23 @@ def check_new_file(path: str, suffix: str) -> Path:
         raise UsageError(f"output file '{path}' must end with {suffix}")
     if out.is_dir():
         raise UsageError(f"output file '{path}' is a folder")
+    return out
+
+
+def check_new_log(path: str, what: str, require: Callable[[], None],
+                  suffix: str | None = None) -> Path:
+    """A log file to write (``what``: "bag", "LCM log"): not a folder, not an existing
+    file (never overwritten), with ``suffix`` if given, and its extra installed
+    (``require`` raises ImportError naming it)."""
+    out = check_new_file(path, suffix) if suffix else Path(path)
+    if out.is_dir():
+        raise UsageError(f"output file '{path}' is a folder")
+    if out.exists():
+        raise UsageError(f"{what} '{path}' exists: not overwritten")
+    try:
+        require()
+    except ImportError as err:
+        raise UsageError(str(err)) from None
     return out
 
 

@@ -10,6 +10,7 @@ from drake_tracker.cli.args import (
     SCENARIO_HELP,
     UsageError,
     check_new_file,
+    check_new_log,
     check_out_dir,
     check_params_for_model,
     load_params_arg,
@@ -22,7 +23,6 @@ from drake_tracker.cli.args import (
 from drake_tracker.cli.lcm_args import (
     add_lcm_track_arguments,
     check_lcm_flags,
-    check_new_lcm_log,
     track_lcm_log_command,
 )
 
@@ -71,28 +71,18 @@ def add_record(sub: argparse._SubParsersAction) -> None:
         if args.out is not None:
             check_new_file(args.out, ".npz")
         if args.bag is not None:
-            _check_new_bag(args.bag)
+            from drake_tracker.io.ros_messages import require_rosbags
+
+            check_new_log(args.bag, "bag", require_rosbags, ".mcap")
         if args.lcm_log is not None:
-            check_new_lcm_log(args.lcm_log)
+            from drake_tracker.io.lcm_messages import require_lcm
+
+            check_new_log(args.lcm_log, "LCM log", require_lcm)
         from drake_tracker.sim.record import run_record
 
         return run_record(args)
 
     p.set_defaults(func=run)
-
-
-def _check_new_bag(path: str) -> None:
-    from pathlib import Path
-
-    check_new_file(path, ".mcap")
-    if Path(path).exists():
-        raise UsageError(f"bag '{path}' exists: not overwritten")
-    try:
-        from drake_tracker.io.ros_messages import require_rosbags
-
-        require_rosbags()
-    except ImportError as err:
-        raise UsageError(str(err)) from None
 
 
 def add_track(sub: argparse._SubParsersAction) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from drake_tracker.cli.args import UsageError, check_params_for_model
@@ -41,20 +40,6 @@ def check_lcm_flags(args: argparse.Namespace) -> None:
     if args.lcm_log is not None and args.camera is None:
         raise UsageError("--lcm-log needs --camera WIDTHxHEIGHT:fx,fy,cx,cy: an LCM depth "
                          "image does not carry its intrinsics")
-
-
-def check_new_lcm_log(path: str) -> None:
-    """``record --lcm-log``'s file: new, not a folder, and the ``lcm`` extra installed."""
-    if Path(path).is_dir():
-        raise UsageError(f"output file '{path}' is a folder")
-    if Path(path).exists():
-        raise UsageError(f"LCM log '{path}' exists: not overwritten")
-    try:
-        from drake_tracker.io.lcm_messages import require_lcm
-
-        require_lcm()
-    except ImportError as err:
-        raise UsageError(str(err)) from None
 
 
 def track_lcm_log_command(args: argparse.Namespace, params: TrackerParams,
