@@ -5,11 +5,11 @@ A source yields :class:`ReadingEvent` and :class:`ImageEvent` in the order they 
 message, so that Unix stamps of 1.7e9 s lose no precision in the filter).
 :func:`track_stream` feeds them to a :class:`~drake_tracker.tracker.Tracker` and hands
 the estimate after every reading the tracker used to a sink (``io/estimates_out.py``).
-It never holds more than one message: a 10-minute bag streams in flat memory.
+It holds only the images that wait for the reading after their capture (see
+``track_stream``): a 10-minute bag streams in flat memory.
 
-An image arrives when the source yields it: its arrival stamp is its capture stamp or
-the latest reading's, whichever is later (a log keeps no other arrival time that shares
-the readings' clock).
+An image without an arrival stamp (``ImageEvent.arrival_s`` None) arrives when it is
+fed: its arrival is its capture stamp or the latest reading's, whichever is later.
 """
 
 from __future__ import annotations
