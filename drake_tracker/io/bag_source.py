@@ -28,15 +28,18 @@ import numpy as np
 
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.io.ros_messages import depth_from_image, require_rosbags, stamp_ns
-from drake_tracker.io.stream import Event, ImageEvent, ReadingEvent, SkippedMessage
+from drake_tracker.io.stream import (
+    Event,
+    ImageEvent,
+    ReadingEvent,
+    SkippedMessage,
+    logged_arrival,
+)
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 IMAGE = "sensor_msgs/msg/Image"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
-#: An image logged later than this after its capture stamp is taken to be logged on
-#: another clock than its stamps (s).
-MAX_LOG_DELAY_S = 1.0
 #: Topics under this prefix hold a simulated run's truth: never tracked from.
 TRUTH_PREFIX = "/truth/"
 #: The topic a ``record --bag`` bag keeps the true hand pose on (X_CE).
@@ -199,20 +202,14 @@ class BagSource:
                         yield SkippedMessage("depth images not usable",
                                              f"depth image at {t:.6f} s skipped: {err}")
                         continue
-                    yield ImageEvent(t, depth, sequence, self._arrival(t, log_ns))
+                    arrival = logged_arrival(t, (int(log_ns) - self.base_ns) / 10**9)
+                    yield ImageEvent(t, depth, sequence, arrival)
                     sequence += 1
         except Exception as err:
             if isinstance(err, GeneratorExit):
                 raise
             raise ValueError(f"bag {self.path} is truncated or corrupt after "
                              f"{sequence} depth images: {err}") from err
-
-    def _arrival(self, capture_s: float, log_ns: int) -> float | None:
-        """An image's arrival: the bag's log time, when it is on the stamps' clock (at or
-        after the capture, by less than ``MAX_LOG_DELAY_S``); else None (the stream's
-        rule: the latest reading's stamp)."""
-        arrival = (int(log_ns) - self.base_ns) / 10**9
-        return arrival if 0.0 <= arrival - capture_s <= MAX_LOG_DELAY_S else None
 
     def truth_X_CE(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(times, (T, 4, 4) X_CE) of the bag's truth topic (``record --bag`` writes

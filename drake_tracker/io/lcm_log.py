@@ -16,7 +16,7 @@ extra) and decoded with Drake's own message classes (``io/lcm_messages.py``).
 * Times: each message's ``utime`` (a status's, an image's ``header.utime``: the
   capture), relative to the earliest first stamp of the two channels, in integer
   microseconds until then, then the nearest float to their count over 1e6. An image's
-  arrival is its log time when that is on the stamps' clock (as for a bag).
+  arrival is its log time when that is on the stamps' clock (``io/stream.py:logged_arrival``).
 * The log is checked as it is read: ``lcm.EventLog`` stops at an event that is cut
   short or not followed by another event's header, as if the log ended there; a log
   it stops reading before its end, or an event that does not start where the previous
@@ -33,7 +33,6 @@ from typing import Any
 from drake import lcmt_image_array
 
 from drake_tracker.core.sensors.camera import CameraIntrinsics
-from drake_tracker.io.bag_source import MAX_LOG_DELAY_S
 from drake_tracker.io.lcm_messages import (
     DRAKE_RGBD_CAMERA_IMAGES,
     IIWA_STATUS,
@@ -45,7 +44,13 @@ from drake_tracker.io.lcm_messages import (
     require_lcm,
     status_type_of,
 )
-from drake_tracker.io.stream import Event, ImageEvent, ReadingEvent, SkippedMessage
+from drake_tracker.io.stream import (
+    Event,
+    ImageEvent,
+    ReadingEvent,
+    SkippedMessage,
+    logged_arrival,
+)
 
 #: An event's header in an lcm-logger file: magic, event number, time, two lengths.
 EVENT_HEADER_BYTES = 4 + 8 + 8 + 4 + 4
@@ -197,14 +202,9 @@ class LcmLogSource:
                                          f"{depth.shape[0]}, the camera is {size[1]}x"
                                          f"{size[0]}")
                     continue
-                yield ImageEvent(t, depth, sequence, self._arrival(t, event.timestamp))
+                arrival = logged_arrival(t, (int(event.timestamp) - self.base_us) / 10**6)
+                yield ImageEvent(t, depth, sequence, arrival)
                 sequence += 1
-
-    def _arrival(self, capture_s: float, log_us: int) -> float | None:
-        """An image's arrival: its log time, when that is on the stamps' clock (at or after
-        the capture, by less than ``MAX_LOG_DELAY_S``); else None (the stream's rule)."""
-        arrival = (int(log_us) - self.base_us) / 10**6
-        return arrival if 0.0 <= arrival - capture_s <= MAX_LOG_DELAY_S else None
 
     def close(self) -> None:
         """Nothing to close: each pass opens the log anew (for the ``BagSource`` API)."""

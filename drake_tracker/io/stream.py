@@ -35,6 +35,16 @@ log = logging.getLogger(__name__)
 
 #: The reading gate's count of readings used without some joints (not skipped).
 PARTIAL = "readings with missing joints"
+#: An image logged later than this after its capture stamp is taken to be logged on
+#: another clock than its stamps (s).
+MAX_LOG_DELAY_S = 1.0
+
+
+def logged_arrival(capture_s: float, logged_s: float) -> float | None:
+    """An image's arrival from a log: its log time ``logged_s`` (stream time), when that
+    is on the stamps' clock (at or after the capture, by at most ``MAX_LOG_DELAY_S``);
+    else None (``ImageEvent.arrival_s``: the stream's rule, the latest reading's stamp)."""
+    return logged_s if 0.0 <= logged_s - capture_s <= MAX_LOG_DELAY_S else None
 
 
 @dataclass(frozen=True)
