@@ -39,9 +39,15 @@ CAMERA_COLUMNS = ("camera_x_m", "camera_y_m", "camera_z_m", "camera_rx_rad",
 POSE_COLUMNS = ("x_m", "y_m", "z_m", "qw", "qx", "qy", "qz")
 
 
+def stamp_ns(base_ns: int, time_s: float) -> int:
+    """``base_ns`` (integer nanoseconds) plus ``time_s`` rounded to the nanosecond: the
+    one rule every writer stamps by, so a run and its bag hold the same times."""
+    return int(base_ns) + int(round(float(time_s) * 1e9))
+
+
 def stamp_text(base_ns: int, time_s: float) -> str:
     """``base_ns`` (integer nanoseconds) plus ``time_s``, as exact decimal seconds."""
-    total = int(base_ns) + int(round(float(time_s) * 1e9))
+    total = stamp_ns(base_ns, time_s)
     sign = "-" if total < 0 else ""
     seconds, nanos = divmod(abs(total), 10**9)
     return f"{sign}{seconds}.{nanos:09d}"
@@ -143,12 +149,12 @@ class EstimatesBag:
 
     def write(self, estimate: TrackerEstimate) -> None:
         """The estimate after a reading, as one message on each topic."""
-        stamp_ns = self.base_ns + int(round(estimate.time_s * 1e9))
+        stamp = stamp_ns(self.base_ns, estimate.time_s)
         m = self.messages
-        pose = m.pose_stamped(stamp_ns, self.camera_frame, pose_values(estimate.X_CE))
-        joints = m.joint_state(stamp_ns, self.names, estimate.positions[self._robot])
-        self._writer.write(self._pose, stamp_ns, m.serialize(pose))
-        self._writer.write(self._joints, stamp_ns, m.serialize(joints))
+        pose = m.pose_stamped(stamp, self.camera_frame, pose_values(estimate.X_CE))
+        joints = m.joint_state(stamp, self.names, estimate.positions[self._robot])
+        self._writer.write(self._pose, stamp, m.serialize(pose))
+        self._writer.write(self._joints, stamp, m.serialize(joints))
         self.rows += 1
 
     def close(self) -> None:

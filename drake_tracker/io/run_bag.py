@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_tracker.io.bag_source import TRUTH_POSE_TOPIC
-from drake_tracker.io.estimates_out import pose_values
+from drake_tracker.io.estimates_out import pose_values, stamp_ns
 from drake_tracker.io.ros_messages import RosMessages, bag_writer
 
 if TYPE_CHECKING:
@@ -28,10 +28,6 @@ if TYPE_CHECKING:
 #: 2023-11-14T22:13:20Z: the default time base of a written bag (ns).
 DEFAULT_BASE_NS = 1_700_000_000 * 10**9
 CAMERA_FRAME = "camera_depth_optical_frame"
-
-
-def _ns(base_ns: int, t: float) -> int:
-    return int(base_ns) + int(round(float(t) * 1e9))
 
 
 def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BASE_NS
@@ -66,14 +62,14 @@ def _messages(run: RecordedRun, m: RosMessages, base_ns: int) -> Iterator[tuple]
 
     def readings():
         for t, q in zip(run.reading_times_s, run.readings_rad):
-            yield _ns(base_ns, t), 0, "joints", lambda t=t, q=q: m.joint_state(
-                _ns(base_ns, t), names, q)
+            yield stamp_ns(base_ns, t), 0, "joints", lambda t=t, q=q: m.joint_state(
+                stamp_ns(base_ns, t), names, q)
 
     def images():
         order, _ = run.images_in_arrival_order()
         for i in order:
-            stamp = _ns(base_ns, run.image_capture_times_s[i])
-            arrival = _ns(base_ns, run.image_arrival_times_s[i])
+            stamp = stamp_ns(base_ns, run.image_capture_times_s[i])
+            arrival = stamp_ns(base_ns, run.image_arrival_times_s[i])
             yield arrival, 1, "info", lambda s=stamp: m.camera_info(
                 s, CAMERA_FRAME, cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
             yield arrival, 2, "depth", lambda s=stamp, i=i: m.depth_image(
@@ -81,7 +77,7 @@ def _messages(run: RecordedRun, m: RosMessages, base_ns: int) -> Iterator[tuple]
 
     def truth():
         for t, X, q in zip(run.truth_times_s, run.truth_X_CE, run.truth_positions_rad):
-            stamp = _ns(base_ns, t)
+            stamp = stamp_ns(base_ns, t)
             yield stamp, 3, "truth_pose", lambda s=stamp, X=X: m.pose_stamped(
                 s, CAMERA_FRAME, pose_values(X))
             yield stamp, 4, "truth_joints", lambda s=stamp, q=q: m.joint_state(s, names, q)
