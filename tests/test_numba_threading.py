@@ -1,11 +1,16 @@
 """The threading layer choice and the serial/parallel policy of the scoring kernel."""
 
+import os
+import subprocess
+import sys
+
 import numba
 import numpy as np
 import pytest
 
 from drake_tracker.core.jit.numba_threading import (
-    DEFAULT_THREADING_LAYER,
+    DEFAULT_GOMP_SPINCOUNT,
+    PREFERRED_LAYERS,
     SerialOrParallel,
     configure_threading_layer,
 )
@@ -26,8 +31,46 @@ def test_user_environment_wins_over_the_default(monkeypatch):
     monkeypatch.setenv("NUMBA_THREADING_LAYER", "omp")
     assert configure_threading_layer() == "omp"
     monkeypatch.delenv("NUMBA_THREADING_LAYER")
-    assert configure_threading_layer() in (DEFAULT_THREADING_LAYER,
-                                           str(numba.config.THREADING_LAYER))
+    assert configure_threading_layer() == str(numba.config.THREADING_LAYER)
+    monkeypatch.setenv("GOMP_SPINCOUNT", "123")
+    configure_threading_layer()
+    assert os.environ["GOMP_SPINCOUNT"] == "123"
+    monkeypatch.delenv("GOMP_SPINCOUNT")
+    monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")
+    configure_threading_layer()
+    assert "GOMP_SPINCOUNT" not in os.environ
+
+
+_LAYER_PROBE = """
+import os, numba, numpy as np
+import drake_tracker.core.jit.numba_threading as t
+@numba.njit(parallel=True)
+def total(x):
+    s = 0.0
+    for i in numba.prange(x.shape[0]):
+        s += x[i]
+    return s
+assert total(np.ones(1000)) == 1000.0
+print(numba.threading_layer(), os.environ.get("GOMP_SPINCOUNT"))
+"""
+
+
+def test_a_fresh_process_loads_the_first_available_preferred_layer():
+    """In a process whose environment names no layer, the first parallel launch loads
+    the first of PREFERRED_LAYERS that numba can load here, with OpenMP's spin bounded."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_THREADING_LAYER", "GOMP_SPINCOUNT", "OMP_WAIT_POLICY")}
+    out = subprocess.run([sys.executable, "-c", _LAYER_PROBE], env=env, check=True,
+                         capture_output=True, text=True).stdout.split()
+    layer, spin = out[-2], out[-1]
+    assert spin == DEFAULT_GOMP_SPINCOUNT
+    for name in PREFERRED_LAYERS:  # the first that loads when asked for by name
+        probe = subprocess.run([sys.executable, "-c", _LAYER_PROBE],
+                               env={**env, "NUMBA_THREADING_LAYER": name},
+                               capture_output=True, text=True)
+        if probe.returncode == 0:
+            break
+    assert layer == name
 
 
 def test_policy_measures_both_then_uses_the_cheaper_and_reprobes(two_numba_threads):

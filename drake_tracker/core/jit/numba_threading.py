@@ -4,19 +4,28 @@ Every module of the package that defines ``parallel=True`` kernels imports this 
 first, so the choice is made before any parallel kernel runs (numba fixes its threading
 layer at the first parallel launch).
 
-Why: one image update makes about 60 small parallel calls (one per CPF block and
-annealing layer, ~35 particles each). Numba's default layer on Linux is OpenMP, whose
-worker threads spin-wait at every barrier; on a machine where the cores are shared, two
-threads made an image update 3-5x *slower* than one. The ``workqueue`` layer ships with
-numba (no extra dependency) and its workers sleep instead of spinning, so a second thread
-never costs more than it brings (measured by ``drake-tracker bench``, 1 vs 2 threads).
+Why: one image update makes about 60 parallel calls (one per CPF block and annealing
+layer, ~35 particles each, about 0.5 ms of work on one thread). What a layer costs to
+start and end such a call decides whether a second thread helps. Measured by
+``drake-tracker bench`` on a 2-core Zen 4 VM (image updates/s, 1 thread -> 2 threads):
 
-Its limit: workqueue must not be entered from two Python threads at once. The tracker
-runs its kernels from one thread (the Drake Simulator's, or the offline loop's); parallel
-evaluations use processes. A user who needs thread-safe concurrent calls can choose
-another layer with the environment variable ``NUMBA_THREADING_LAYER`` (e.g. ``tbb`` after
-``pip install tbb``, or ``omp`` with ``OMP_WAIT_POLICY=PASSIVE``), which always wins over
-this default.
+* ``workqueue`` (ships with numba): 31 -> 23. Its workers sleep on a condition variable
+  and are woken per call, about 0.2 ms a call: a second thread made an update slower.
+* ``omp`` (GNU OpenMP) with its default spin (300,000 iterations): 31 -> 42. Its idle
+  workers spin before they sleep, which on a loaded machine steals the core that the
+  serial part of the sweep (sampling, resampling) or the Drake Simulator needs.
+* ``omp`` with ``GOMP_SPINCOUNT`` 10,000 (:data:`DEFAULT_GOMP_SPINCOUNT`): 31 -> 41-48.
+  The workers spin through the gap between two blocks (tens of microseconds), then sleep.
+
+So the layers are tried in the order of :data:`PREFERRED_LAYERS` (``omp`` needs the
+system's ``libgomp.so.1``; without it numba falls back to ``workqueue``), and the spin is
+bounded unless the user set ``GOMP_SPINCOUNT`` or ``OMP_WAIT_POLICY``. Whatever the layer,
+:class:`SerialOrParallel` keeps a sweep on one thread while the parallel run is the dearer
+(a loaded machine). A user's ``NUMBA_THREADING_LAYER`` always wins over this default.
+
+Forks: GNU OpenMP is not fork-safe once its threads exist. The evaluation's pools spawn
+their processes; a forked child that launches a parallel kernel after the parent did is
+stopped by numba with a message saying so.
 """
 
 from __future__ import annotations
@@ -27,21 +36,28 @@ from collections.abc import Callable
 
 import numba
 
-#: The layer chosen when the user has not set ``NUMBA_THREADING_LAYER``.
-DEFAULT_THREADING_LAYER = "workqueue"
+#: The threading layers in the order they are tried when the user names none.
+PREFERRED_LAYERS = ("omp", "workqueue", "tbb")
+#: GNU OpenMP's spin (iterations) before an idle worker sleeps, unless the user sets one.
+DEFAULT_GOMP_SPINCOUNT = "10000"
 
 
 def configure_threading_layer() -> str:
-    """Selects :data:`DEFAULT_THREADING_LAYER` unless the user's environment names a layer.
+    """Chooses the layer (:data:`PREFERRED_LAYERS`, first available) and bounds OpenMP's
+    spin (:data:`DEFAULT_GOMP_SPINCOUNT`), unless the environment names them.
 
-    Returns the configured layer name (what numba will load at its first parallel
-    launch). Harmless once a layer is loaded: numba then keeps the one it has.
+    Returns the configured layer setting: the user's ``NUMBA_THREADING_LAYER`` if set,
+    else ``"default"`` (numba then loads the first of ``THREADING_LAYER_PRIORITY`` it
+    can at its first parallel launch; :func:`numba.threading_layer` names it after).
+    Harmless once a layer is loaded: numba then keeps the one it has.
     """
+    if not (os.environ.get("GOMP_SPINCOUNT") or os.environ.get("OMP_WAIT_POLICY")):
+        os.environ["GOMP_SPINCOUNT"] = DEFAULT_GOMP_SPINCOUNT
     requested = os.environ.get("NUMBA_THREADING_LAYER", "").strip()
     if requested:
         return requested
     if numba.config.THREADING_LAYER == "default":
-        numba.config.THREADING_LAYER = DEFAULT_THREADING_LAYER
+        numba.config.THREADING_LAYER_PRIORITY = list(PREFERRED_LAYERS)
     return str(numba.config.THREADING_LAYER)
 
 
