@@ -42,6 +42,10 @@ class JointNoise:
     #: occluded, 22.9 now). With σb = 0.0088 as well (the "occlusion hold") arm++/constant
     #: lost a seed (README, "A bias that outlasts an occlusion").
     bias_decay_per_s: float = 0.98
+    #: Let the images set σb² (rad²/s) between σb² and ``initial_bias_std_rad``² per
+    #: second, from their innovations (``core/filter/bias_noise.py``): a bias that drifts
+    #: faster than σb is followed. Off for the virtual camera joints.
+    match_bias_noise_to_images: bool = True
     #: Expected bias jumps per second (a cable slipping, a gear skipping): the image
     #: update's prior admits a step of ``bias_jump_std_rad`` with probability
     #: 1 - exp(-rate * time since the previous image), so an image that shows one is
@@ -69,6 +73,7 @@ def _virtual_joint_noise() -> JointNoise:
         angle_process_std_rad_per_sqrt_s=0.015,
         bias_process_std_rad_per_sqrt_s=0.01,
         bias_decay_per_s=1.0,
+        match_bias_noise_to_images=False,
         has_bias=True,
         initial_angle_std_rad=0.01,
         initial_bias_std_rad=0.01,

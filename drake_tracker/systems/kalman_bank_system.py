@@ -19,7 +19,7 @@ from pydrake.systems.framework import (
 )
 
 from drake_tracker.core.filter.estimate import PoseReadout
-from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B, JointKalmanBank
 from drake_tracker.core.filter.start import full_reading, initial_belief, new_bank
 from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.systems.messages import AdmittedReading, BeliefCorrection
@@ -91,7 +91,9 @@ class JointKalmanBankSystem(LeafSystem):
     estimated camera frame, ``X_WE`` the hand and ``X_WC`` the estimated camera in the
     model's world. Before the first reading the estimate is the zero configuration.
 
-    Discrete state: ``belief`` (:meth:`belief`) and ``bookkeeping`` (:meth:`bookkeeping`).
+    Discrete state: ``belief`` (:meth:`belief`), ``bookkeeping`` (:meth:`bookkeeping`)
+    and ``bias_process_var`` (:meth:`bias_process_var`: the σb² the bank runs with, the
+    buffer's after each image).
     """
 
     def __init__(self, *, model: TrackerModel, params: TrackerParams | ResolvedParams,
@@ -106,12 +108,15 @@ class JointKalmanBankSystem(LeafSystem):
         self._virtual = model.virtual_joint_indices
         self._belief = self.DeclareDiscreteState(np.zeros(5 * n))
         self._bookkeeping = self.DeclareDiscreteState(KalmanBankState().to_vector())
+        self._bias_var = self.DeclareDiscreteState(self._bank.bias_process_var)
+        self._bank_key = self._bank.bias_process_var.tobytes()
         self._reading = self.DeclareAbstractInputPort(
             "reading", AbstractValue.Make(AdmittedReading()))
         self._correction = self.DeclareAbstractInputPort(
             "correction", AbstractValue.Make(BeliefCorrection()))
         deps = {self.discrete_state_ticket(self._belief)}
-        self._groups = (int(self._belief), int(self._bookkeeping))  # plain ints: fastest
+        # plain ints: fastest
+        self._groups = (int(self._belief), int(self._bookkeeping), int(self._bias_var))
         self._outputs = {"belief": self.DeclareVectorOutputPort(
             "belief", 5 * n, lambda c, o: o.SetFromVector(self.belief(c).ravel()), deps)}
         for name, row in _ROWS.items():
@@ -149,6 +154,17 @@ class JointKalmanBankSystem(LeafSystem):
         return KalmanBankState.from_vector(
             context.get_discrete_state().get_value(self._groups[1]))
 
+    def bias_process_var(self, context: Context) -> np.ndarray:
+        """The bias variance rates σb² (n,) (rad²/s) the bank runs with in ``context``."""
+        return context.get_discrete_state().get_value(self._groups[2]).copy()
+
+    def _bank_for(self, var: np.ndarray) -> JointKalmanBank:
+        """The bank with σb² ``var`` (rebuilt only when they changed)."""
+        key = var.tobytes()
+        if key != self._bank_key:
+            self._bank, self._bank_key = self._bank.with_bias_process_var(var), key
+        return self._bank
+
     def _update(self, context: Context, discrete_state) -> EventStatus | None:
         s = self.bookkeeping(context)
         reading = self._reading.Eval(context)
@@ -166,15 +182,17 @@ class JointKalmanBankSystem(LeafSystem):
             belief = correction.belief.copy()
             s.time_s, s.last_reading_s = correction.time_s, correction.last_reading_time_s
             s.correction_id = correction.id
+            if correction.bias_process_var is not None:
+                discrete_state.set_value(self._groups[2], correction.bias_process_var)
         if new_reading:
             s.reading_id = reading.id
-            belief = self._filter(s, reading, belief)
+            belief = self._filter(s, reading, belief, discrete_state)
         discrete_state.set_value(self._groups[0], belief.ravel())
         discrete_state.set_value(self._groups[1], s.to_vector())
         return None
 
     def _filter(self, s: KalmanBankState, reading: AdmittedReading,
-                belief: np.ndarray) -> np.ndarray:
+                belief: np.ndarray, state) -> np.ndarray:
         """The belief after an admitted reading (eqs. 3-5 of ``docs/method.md``)."""
         t = reading.time_s
         if reading.restarted:  # the clock restarted: start again from this reading
@@ -183,8 +201,9 @@ class JointKalmanBankSystem(LeafSystem):
             return belief  # the adopted correction holds it already
         if s.time_s is None:
             belief, s.time_s = initial_belief(self._params, reading.values), t
-        belief = self._bank.step_unchecked(belief, t - s.time_s,
-                                           full_reading(self._params, reading.values))
+        bank = self._bank_for(state.get_value(self._groups[2]))
+        belief = bank.step_unchecked(belief, t - s.time_s,
+                                     full_reading(self._params, reading.values))
         s.time_s = s.last_reading_s = t
         return belief
 
