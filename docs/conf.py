@@ -26,7 +26,20 @@ extensions = [
     "sphinx.ext.napoleon",
     "sphinx.ext.intersphinx",
     "param_reference",
+    "api_pages",
+    "pydrake_links",
 ]
+
+# pydrake's documentation, from a shipped inventory: the build never uses the network.
+intersphinx_mapping = {
+    "pydrake": ("https://drake.mit.edu/pydrake/", str(DOCS / "_inventories" / "pydrake.inv")),
+}
+
+autodoc_member_order = "bysource"
+autodoc_typehints = "signature"
+autodoc_class_signature = "separated"
+napoleon_google_docstring = True
+napoleon_numpy_docstring = False
 
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
@@ -39,3 +52,4 @@ myst_heading_anchors = 3
 
 html_theme = "alabaster"
 html_title = f"drake_tracker {release}"
+
