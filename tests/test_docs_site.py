@@ -8,6 +8,7 @@ import importlib
 import inspect
 import pkgutil
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -99,7 +100,10 @@ def site(tmp_path_factory) -> tuple[Path, dict]:
     from sphinx.util.inventory import InventoryFile
 
     out = tmp_path_factory.mktemp("site")
-    status = build_main(["-W", "-q", "-b", "html", str(DOCS), str(out)])
+    with warnings.catch_warnings():  # Sphinx's deprecation notices about its extensions
+        warnings.simplefilter("ignore", DeprecationWarning)
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        status = build_main(["-W", "-q", "-b", "html", str(DOCS), str(out)])
     assert status == 0, "the site does not build without warnings"
     with (out / "objects.inv").open("rb") as f:
         inventory = InventoryFile.load(f, "", lambda base, uri: uri)
