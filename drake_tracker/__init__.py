@@ -42,6 +42,7 @@ from drake_tracker.systems import (
 )
 from drake_tracker.tracker import Tracker
 
+#: The package's version, as the wheel states it.
 __version__ = "0.1.0"
 
 __all__ = ["__version__", "AddImageStamper", "AddTracker", "CameraIntrinsics",

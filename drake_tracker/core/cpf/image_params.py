@@ -67,6 +67,7 @@ class ImageParams:
     update_latency_s: float = 0.08
     #: ``batched`` (numba rasteriser) or ``drake`` (RenderEngineVtk, the reference).
     renderer: str = "batched"
+    #: The near and far clipping planes of the particles' renderings (m).
     near_m: float = 0.1
     far_m: float = 6.0
     #: Estimate each image's occlusion probability o (the likelihood's prior
