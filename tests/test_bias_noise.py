@@ -153,3 +153,25 @@ def test_a_copy_of_the_buffer_keeps_its_own_rate():
     clone.add_image_observation(anchor, _observation(float(anchor.prior[MEAN_A, 0]) + 0.2, 1e-6))
     assert clone.bias_noise.rate_var[0] > before[0]
     assert np.array_equal(buffer.bank.bias_process_var, before)
+
+
+def test_only_an_image_that_confirms_a_tracked_belief_informs_the_rate():
+    """``confirms_tracking``: tracked before, and this image agrees (one more agreeing
+    image in a row, none disagreeing); an observation marked otherwise moves no rate."""
+    from dataclasses import replace
+
+    from drake_tracker.core.image_step import confirms_tracking
+    from drake_tracker.core.robustness.health import HealthState, TrackerHealth
+
+    tracked = TrackerHealth(HealthState.TRACKING, agreeing_in_a_row=3)
+    agreeing = replace(tracked, agreeing_in_a_row=4)
+    assert confirms_tracking(tracked, agreeing)
+    assert confirms_tracking(tracked, replace(agreeing, state=HealthState.UNCERTAIN))
+    assert not confirms_tracking(tracked, replace(agreeing, agreeing_in_a_row=0,
+                                                  disagreeing_in_a_row=1))
+    assert not confirms_tracking(replace(tracked, state=HealthState.UNCERTAIN), agreeing)
+    match = BiasNoiseMatch.start(np.array([MIN_VAR]), np.array([1.0]), np.array([True]))
+    match = match.after_image(0.0, _prior(0.0, 1e-4), _observation(0.0, 1e-4))
+    far = replace(_observation(1.0, 1e-4), informs_bias_noise=False)
+    assert match.after_image(0.1, _prior(0.0, 1e-4), far).rate_var[0] == MIN_VAR
+    assert replace(far, informs_bias_noise=False).shifted(np.ones(1)).informs_bias_noise is False

@@ -30,7 +30,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_tracker.core.filter.angle_observation import AngleObservation
-from drake_tracker.core.robustness.health import HealthParams, TrackerHealth, next_health
+from drake_tracker.core.robustness.health import (
+    HealthParams,
+    HealthState,
+    TrackerHealth,
+    next_health,
+)
 from drake_tracker.core.sensors.depth_frames import DepthFrame, image_time
 from drake_tracker.core.sensors.timestamps import (
     StampDecision,
@@ -138,4 +143,15 @@ def conclude_image(outcome: ImageOutcome, health: TrackerHealth,
                             "images without a valid pixel")
     after = next_health(health, outcome.consistency, params, outcome.restarted,
                         outcome.misplaced, outcome.challenger)
-    return ImageVerdict(outcome.observation, after)
+    observation = outcome.observation
+    if not confirms_tracking(health, after):
+        observation = replace(observation, informs_bias_noise=False)
+    return ImageVerdict(observation, after)
+
+
+def confirms_tracking(before: TrackerHealth, after: TrackerHealth) -> bool:
+    """Whether an image confirmed a tracked belief: the arm was tracked before it (two
+    agreeing images in a row at least) and it agrees too. Only such an image's innovation
+    sets the bias noise (``AngleObservation.informs_bias_noise``)."""
+    return (before.state == HealthState.TRACKING and after.disagreeing_in_a_row == 0
+            and after.agreeing_in_a_row > before.agreeing_in_a_row)

@@ -71,10 +71,12 @@ class BiasNoiseMatch:
                     observation: AngleObservation) -> BiasNoiseMatch:
         """The match after an image observed at ``t`` (its anchor) against ``prior``
         (5, n) there. An image before the previous one (out of order), the first image,
-        and a restart only move ``last_image_s``; joints the image did not observe
-        (zero precision) keep their rate."""
+        a restart and an observation that does not ``informs_bias_noise`` only move
+        ``last_image_s``; joints the image did not observe (zero precision) keep their
+        rate."""
         dt = t - self.last_image_s
-        if not (np.isfinite(dt) and dt > 0) or observation.restart is not None:
+        if not (np.isfinite(dt) and dt > 0) or observation.restart is not None \
+                or not observation.informs_bias_noise:
             return replace(self, last_image_s=max(t, self.last_image_s))
         precision = observation.precision
         seen = self.adapts & (precision > 0) & (prior[VAR_A] > 0)
