@@ -60,10 +60,12 @@ log = logging.getLogger(__name__)
 MAX_JUMP_WINDOW_S = 1.0
 
 
-def image_rng(seed: int, sequence: int) -> np.random.Generator:
-    """The CPF's random stream for image ``sequence``: independent of what came before,
-    so a re-simulated or replayed run draws the same numbers."""
-    return np.random.default_rng([int(seed), int(sequence), 0x5EED])
+def image_rng(seed: int, sequence: int, camera_index: int = 0) -> np.random.Generator:
+    """The CPF's random stream for image ``sequence`` of the model's camera
+    ``camera_index``: independent of what came before, so a re-simulated or replayed run
+    draws the same numbers (the first camera's streams are the one-camera tracker's)."""
+    key = [int(seed), int(sequence), 0x5EED] + ([int(camera_index)] if camera_index else [])
+    return np.random.default_rng(key)
 
 
 @dataclass(frozen=True)
@@ -88,12 +90,21 @@ class ImageProcessor:
     """Turns a depth frame and the prior at its time into a pseudo-observation.
 
     Shared by the offline tracker and the Drake CPF system, so that both draw the same
-    random numbers and skip the same images.
+    random numbers and skip the same images. With several cameras there is one per
+    camera (``camera_name``): it renders through that camera's estimated frame and
+    samples the robot joints and that camera's six virtual joints only
+    (``ResolvedParams.blocks_for``).
     """
 
     def __init__(self, model: TrackerModel, camera: CameraIntrinsics,
-                 params: ResolvedParams) -> None:
+                 params: ResolvedParams, camera_name: str | None = None) -> None:
         self.params = params
+        self.camera_name = camera_name
+        #: Which of the model's cameras (its random streams: ``image_rng``).
+        self.camera_index = 0
+        if camera_name is not None:
+            self.camera_index = model.camera_names.index(model.camera(camera_name).name)
+            model = model.for_camera(camera_name)
         im, joints = params.image, params.joints
         self._jump_rate = joints.jump_rate_per_s
         self._jump_std = joints.jump_std
@@ -101,7 +112,7 @@ class ImageProcessor:
                                 joints.initial_bias_std, joints.has_bias)
         self.restart = Restart(start[VAR_A], start[VAR_B])  # the variances of the start
         self.update = CpfImageUpdate(
-            model, camera, list(params.blocks), im.num_particles,
+            model, camera, list(params.blocks_for(camera_name)), im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
             tuple(im.annealing_betas), tuple(im.sweep_image_widths_px),
             im.search_depth_widening_m)
@@ -182,7 +193,7 @@ class ImageProcessor:
                                      image.likelihood, image.min_jump_pixels,
                                      self.consistent(predicted))
             jumps[joints[~testable]] = 0.0
-        rng = image_rng(self.params.image.seed, frame.sequence)
+        rng = image_rng(self.params.image.seed, frame.sequence, self.camera_index)
         # An arm never held since the start or a restart: the search may be widened in
         # depth (image.search_depth_widening_m).
         never_held = not acquired and (restarted or not np.isfinite(health.confirmed_s))

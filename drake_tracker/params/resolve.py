@@ -32,8 +32,16 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
     params = TrackerParams() if params is None else params
     validate_tracker_params(params)
     names = list(model.joint_names)
-    chain = camera_chain_joints(model)
-    noise = joint_noise_for(params, names, model.prismatic_joint_names)
+    virtual = model.virtual_joint_names
+    per_camera = []  # each camera's blocks: its images move its own offset joints only
+    for camera in model.cameras:
+        own = camera.virtual_joint_names
+        per_camera.append((camera.name, tuple(resolve_blocks(
+            params, names, camera_chain_joints(model.for_camera(camera.name)), own,
+            [n for n in virtual if n not in own]))))
+    chains = {n for c in model.cameras for n in camera_chain_joints(model.for_camera(c.name))}
+    chain = [n for n in names if n in chains]
+    noise = joint_noise_for(params, names, model.prismatic_joint_names, virtual)
     unknown = sorted(set(params.initial_positions_rad) - set(names))
     if unknown:
         raise ValueError(f"initial_positions_rad: unknown joint names {unknown}")
@@ -66,8 +74,9 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
     )
     return ResolvedParams(
         joints=joints,
-        blocks=tuple(resolve_blocks(params, names, chain)),
+        blocks=per_camera[0][1],
         camera_chain=tuple(chain),
+        camera_blocks=tuple(per_camera),
         image=params.image,
         health=params.health,
         timestamps=params.timestamps,
@@ -93,7 +102,8 @@ def kalman_params(noise: list[JointNoise], names: list[str]) -> KalmanBankParams
 
 
 def camera_chain_joints(model: TrackerModel) -> list[str]:
-    """The robot joints that move the camera (e.g. a pan-tilt head), base first."""
+    """The robot joints that move the (active: ``TrackerModel.for_camera``) camera (e.g.
+    a pan-tilt head), base first."""
     plant = model.plant
     camera_body = model.nominal_camera_frame.body().index()
     chain = []
@@ -105,8 +115,10 @@ def camera_chain_joints(model: TrackerModel) -> list[str]:
 
 
 def joint_noise_for(params: TrackerParams, joint_names: list[str],
-                    prismatic: Collection[str] = ()) -> list[JointNoise]:
-    """The JointNoise of each joint: its override, else the virtual joints', the
+                    prismatic: Collection[str] = (),
+                    virtual: Collection[str] = VIRTUAL_JOINT_NAMES) -> list[JointNoise]:
+    """The JointNoise of each joint: its override, else the virtual joints' (``virtual``:
+    every camera's, ``TrackerModel.virtual_joint_names``), the
     prismatic joints' (``prismatic``: the robot's, ``TrackerModel.prismatic_joint_names``)
     or the robot joints' default; unknown override names raise ValueError."""
     unknown = sorted(set(params.kalman.overrides) - set(joint_names))
@@ -117,7 +129,7 @@ def joint_noise_for(params: TrackerParams, joint_names: list[str],
     for name in joint_names:
         if name in params.kalman.overrides:
             out.append(params.kalman.overrides[name])
-        elif name in VIRTUAL_JOINT_NAMES:
+        elif name in virtual:
             out.append(params.kalman.virtual_joints)
         elif name in prismatic:
             out.append(params.kalman.prismatic_joints)
@@ -127,8 +139,12 @@ def joint_noise_for(params: TrackerParams, joint_names: list[str],
 
 
 def resolve_blocks(params: TrackerParams, joint_names: list[str],
-                   camera_chain: list[str] = ()) -> list[np.ndarray]:
-    """Index arrays of the CPF blocks. Without ``estimate_camera_offset`` the virtual
+                   camera_chain: list[str] = (),
+                   virtual: Collection[str] = VIRTUAL_JOINT_NAMES,
+                   excluded: Collection[str] = ()) -> list[np.ndarray]:
+    """Index arrays of the CPF blocks of one camera's images: ``virtual`` are its six
+    virtual joints, ``excluded`` the other cameras' (in no block: an image leaves the
+    other cameras' offsets as they are). Without ``estimate_camera_offset`` the virtual
     joints are left out of every block (they stay at their prior, 0).
 
     ``per-joint`` samples the camera first: the robot joints that move the camera
@@ -137,8 +153,10 @@ def resolve_blocks(params: TrackerParams, joint_names: list[str],
     the arm's base joints absorb the camera's error, and the estimate drifts.
     """
     im = params.image
-    virtual = [n for n in joint_names if n in VIRTUAL_JOINT_NAMES]
-    robot = [n for n in joint_names if n not in VIRTUAL_JOINT_NAMES]
+    excluded = set(excluded)
+    own = set(virtual)
+    virtual = [n for n in joint_names if n in own]
+    robot = [n for n in joint_names if n not in own and n not in excluded]
     if im.blocks == "per-joint":
         chain = [n for n in robot if n in camera_chain]
         rest = [n for n in robot if n not in camera_chain]
