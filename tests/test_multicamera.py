@@ -96,14 +96,39 @@ def test_a_camera_is_seen_through_its_own_offset_as_drake_computes_it(two_camera
         np.testing.assert_allclose(X_CB[body] @ X_BE, hand.GetAsMatrix4(), atol=1e-9)
 
 
+def joints_that_move(model, frame) -> set[int]:
+    """Indices of the robot joints that move ``frame`` in the world, by Drake: each
+    joint turned 0.3 rad alone."""
+    plant = model.plant
+    context = plant.CreateDefaultContext()
+    q0 = plant.GetPositions(context)
+    X0 = frame.CalcPoseInWorld(context).GetAsMatrix4()
+    moving = set()
+    for k in model.robot_joint_indices:
+        q = q0.copy()
+        q[k] += 0.3
+        plant.SetPositions(context, q)
+        if not np.allclose(frame.CalcPoseInWorld(context).GetAsMatrix4(), X0, atol=1e-9):
+            moving.add(int(k))
+        plant.SetPositions(context, q0)
+    return moving
+
+
 def test_an_image_moves_the_robot_and_its_own_camera_only(two_cameras):
+    """Each camera's images sample its own six offset joints and the robot joints, but
+    neither another camera's offset joints nor the joints that move another camera and
+    not this one (the head's pan and tilt, for the camera on the post)."""
     params = resolve_tracker_params(small_params(), two_cameras)
-    for name in two_cameras.camera_names:
+    head = joints_that_move(two_cameras, two_cameras.camera("camera").nominal_frame)
+    assert {two_cameras.joint_names[k] for k in head} == {"head_pan", "head_tilt"}
+    assert joints_that_move(two_cameras, two_cameras.camera("post").nominal_frame) == set()
+    robot = set(two_cameras.robot_joint_indices.tolist())
+    for name, others_chain in (("camera", set()), ("post", head)):
         own = set(two_cameras.camera_joint_indices(name).tolist())
         other = set(two_cameras.virtual_joint_indices.tolist()) - own
         sampled = set(np.concatenate(params.blocks_for(name)).tolist())
         assert own <= sampled and not sampled & other
-        assert set(two_cameras.robot_joint_indices.tolist()) <= sampled
+        assert sampled & robot == robot - others_chain
 
 
 def test_a_second_camera_without_images_gives_the_one_camera_estimate(apollo, two_cameras):
@@ -204,3 +229,32 @@ def test_two_camera_presets_declare_two_mounted_cameras():
     scenario.cameras[1].name = "camera"
     with pytest.raises(ValueError, match="two cameras have this name"):
         validate_scenario(scenario, check_model=False)
+
+
+def test_an_image_of_one_of_several_cameras_that_shows_no_arm_is_not_applied(apollo):
+    """A camera that looks away from the robot (3 m above the torso, looking up): with
+    another camera, its image is skipped and counted (it could only push the joints it
+    sees away from its view) and the estimate stays bit for bit; as the only camera, the
+    same image is applied."""
+    up = FrameOffset(parent="torso", xyz_m=[0.0, 0.0, 3.0])
+    config = two_camera_config()
+    config.added_frames = {"post_nominal": POST, "up_nominal": up}
+    config.cameras = [CameraMount("camera", "camera_optical"), CameraMount("up", "up_nominal")]
+    alone = robot_preset("apollo")
+    alone.added_frames = {"up_nominal": up}
+    alone.cameras = [CameraMount("up", "up_nominal")]
+    wall = np.full((60, 80), 2.0, np.float32)
+    applied = {}
+    for label, model, cameras in (("several", build_tracker_model(config), {"camera": CAMERA,
+                                                                            "up": CAMERA}),
+                                  ("alone", build_tracker_model(alone), {"up": CAMERA})):
+        tracker = Tracker(model, params=small_params(), cameras=cameras)
+        n = len(model.robot_joint_names)
+        for k in range(10):
+            tracker.add_reading(0.01 * k, np.full(n, 0.1))
+        before = tracker.estimate().positions
+        applied[label] = tracker.add_image(DepthFrame(0.05, 0.08, wall, 0), camera="up")
+        if label == "several":
+            np.testing.assert_array_equal(tracker.estimate().positions, before)
+            assert tracker.warnings.counts["images that show no arm"] == 1
+    assert applied == {"several": False, "alone": True}
