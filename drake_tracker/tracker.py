@@ -20,6 +20,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.core.cameras import (
+    CameraChannel,
+    best_health,
+    camera_channels,
+    clock_disagreement,
+)
 from drake_tracker.core.cpf.image_update import check_depth_image
 from drake_tracker.core.cpf.particle_filter import CPFResult
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
@@ -33,7 +39,7 @@ from drake_tracker.core.image_step import (
     place_image,
 )
 from drake_tracker.core.robustness.health import TrackerHealth
-from drake_tracker.core.sensors.camera import CameraIntrinsics, as_intrinsics
+from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame, depth_to_metres
 from drake_tracker.core.sensors.depth_units import check_depth_units
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
@@ -59,31 +65,39 @@ class Tracker:
     Args:
         model: the tracker's model (``build_tracker_model``).
         camera: intrinsics of the depth images that will be passed in (or Drake's
-            ``CameraInfo``).
+            ``CameraInfo``): the model's first (with one camera, only) camera.
         params: tracker parameters (default: ``TrackerParams()``), checked and resolved
             for ``model`` once, here; or already resolved (``resolve_tracker_params``).
+        cameras: instead of ``camera``, several of the model's cameras by name
+            (``RobotConfig.cameras``) -> their intrinsics; images then name their camera
+            (``add_image(frame, camera=NAME)``). A camera of the model left out has no
+            images: its offset stays at its prior.
     """
 
-    def __init__(self, model: TrackerModel, camera: CameraIntrinsics | CameraInfo,
-                 params: TrackerParams | ResolvedParams | None = None) -> None:
+    def __init__(self, model: TrackerModel, camera: CameraIntrinsics | CameraInfo | None = None,
+                 params: TrackerParams | ResolvedParams | None = None, *,
+                 cameras: dict[str, CameraIntrinsics | CameraInfo] | None = None) -> None:
+        if (camera is None) == (cameras is None):
+            raise ValueError("Tracker: give either camera= (the model's first camera) or "
+                             "cameras={name: intrinsics}, one of the two")
         self.model = model
-        self.camera = as_intrinsics(camera)
         #: The resolved parameters every step reads.
         self.params = resolve_tracker_params(params, model)
         self.readout = PoseReadout(model)
-        self.images = ImageProcessor(model, self.camera, self.params) \
-            if self.params.image.enabled else None
+        #: Each camera's image update, clock, pacing and health (``core/cameras.py``).
+        self.channels: dict[str, CameraChannel] = camera_channels(
+            model, {model.camera_names[0]: camera} if cameras is None else cameras,
+            self.params)
+        first = next(iter(self.channels.values()))
+        self.camera = first.intrinsics
+        self.images: ImageProcessor | None = first.images
+        self.image_clock: StreamClock = first.clock
         self.buffer: BeliefBuffer | None = None
-        #: Which images are due (``core/image_step.py``, step 2).
-        self.pacing = ImagePacing()
-        #: Updated after every applied image (``core/robustness/health.py``).
-        self.health = TrackerHealth()
         self.last_result: CPFResult | None = None
         self.num_images_applied = 0
         self.num_images_skipped = 0
         stamps = self.params.timestamps
         self.readings = ReadingGate(stamps, model.robot_joint_names, log)
-        self.image_clock = StreamClock("image", stamps, self.params.buffer_horizon_s)
         self.warnings = RateLimitedWarning(log)
         if not self.params.use_joint_readings:
             self.buffer = new_belief_buffer(self.params, 0.0, None)
@@ -122,8 +136,33 @@ class Tracker:
         self.buffer.add_reading(t, full_reading(self.params, reading))
         return True
 
-    def add_image(self, frame: DepthFrame) -> bool:
-        """A depth image (full resolution of ``camera``; float metres, or uint16
+    @property
+    def pacing(self) -> ImagePacing:
+        """Which images of the first camera are due (``core/image_step.py``, step 2)."""
+        return next(iter(self.channels.values())).pacing
+
+    @property
+    def health(self) -> TrackerHealth:
+        """Updated after every applied image (``core/robustness/health.py``): with several
+        cameras, that of the camera in the best state (``core/cameras.best_health``)."""
+        return best_health(self.channels)
+
+    def channel(self, camera: str | None) -> CameraChannel:
+        """The channel of the camera named ``camera`` (None: the only one); ValueError
+        naming the tracker's cameras for an unknown name, or None with several."""
+        if camera is None:
+            if len(self.channels) > 1:
+                raise ValueError(f"the tracker has the cameras {list(self.channels)}: "
+                                 "name the image's camera (add_image(frame, camera=NAME))")
+            return next(iter(self.channels.values()))
+        if camera not in self.channels:
+            raise ValueError(f"image from unknown camera '{camera}': the tracker's cameras "
+                             f"are {list(self.channels)}")
+        return self.channels[camera]
+
+    def add_image(self, frame: DepthFrame, camera: str | None = None) -> bool:
+        """A depth image of the camera named ``camera`` (None: the tracker's only one; an
+        unknown name raises ValueError) at its full resolution (float metres, or uint16
         millimetres with 0 and 65535 for no return); True when it was applied.
 
         Images before the first reading, with a stamp the time-stamp policy rejects
@@ -131,48 +170,62 @@ class Tracker:
         in a gap of the readings, not due yet (``min_image_interval_s``) or without a
         valid pixel are skipped, with a rate-limited warning for all but the not-due
         ones. A malformed image, or one not in metres (``core/sensors/depth_units.py``),
-        raises ValueError. The steps are ``core/image_step.py``'s.
+        raises ValueError. The steps are ``core/image_step.py``'s, through the camera's
+        image update, clock, pacing and health, into the one delay buffer; an image whose
+        camera's clock disagrees with another camera's by more than the buffer horizon is
+        skipped, warned and counted.
         """
+        channel = self.channel(camera)
         if frame.is_empty:
             if np.size(frame.depth_m):
                 raise ValueError(f"image with sequence {frame.sequence}: a negative sequence "
                                  "number marks the empty placeholder (DepthFrame.empty()), "
                                  "not an image; number images from 0")
-            return self._skip(frame, "it is the empty placeholder (DepthFrame.empty()): "
-                              "no image yet", "empty placeholder frames")
-        if self.images is None:
+            return self._skip(frame, channel, "it is the empty placeholder "
+                              "(DepthFrame.empty()): no image yet", "empty placeholder frames")
+        if channel.images is None:
             return False
         if np.asarray(frame.depth_m).dtype == np.uint16:  # a 16-bit camera's millimetres
             frame = replace(frame, depth_m=depth_to_metres(frame.depth_m, "16U_mm"))
-        check_depth_image(frame.depth_m, self.camera)  # before anything changes
+        check_depth_image(frame.depth_m, channel.intrinsics)  # before anything changes
         check_depth_units(frame.depth_m)
         if self.buffer is None:
-            return self._skip(frame, "no joint reading yet", "images before a reading")
-        decision = judge_stamp(frame, self.image_clock, self.buffer, self.readings.clock,
+            return self._skip(frame, channel, "no joint reading yet",
+                              "images before a reading")
+        decision = judge_stamp(frame, channel.clock, self.buffer, self.readings.clock,
                                self.params, log, images_keep_time=True)
         t = decision.time_s
         if t is None:
-            return self._skip(frame, decision.problem, decision.kind)
-        if not self.pacing.wants(t):
+            return self._skip(frame, channel, decision.problem, decision.kind)
+        lag = frame.arrival_time_s - t
+        problem = clock_disagreement(channel, self.channels, lag, self.params.buffer_horizon_s)
+        if problem:
+            return self._skip(frame, channel, problem, "images whose camera clock disagrees")
+        if not channel.pacing.wants(t):
             self.num_images_skipped += 1
             return False
         anchor, problem = place_image(self.buffer, t)
         if anchor is None:
-            return self._skip(frame, problem, problem_kind(problem))
-        outcome = self.images.observe(frame, anchor.prior,
-                                      self.pacing.jump_window_s(t, self.health), self.health)
-        self.pacing = self.pacing.taken_up(t, self.params.image.min_image_interval_s)
+            return self._skip(frame, channel, problem, problem_kind(problem))
+        channel.lag_s = lag
+        health = channel.health
+        outcome = channel.images.observe(frame, anchor.prior,
+                                         channel.pacing.jump_window_s(t, health), health)
+        channel.pacing = channel.pacing.taken_up(t, self.params.image.min_image_interval_s)
         self.last_result = outcome.result
-        verdict = conclude_image(outcome, self.health, self.params.health)
-        self.health = verdict.health
+        verdict = conclude_image(outcome, health, self.params.health)
+        channel.health = verdict.health
         if verdict.observation is None:
-            return self._skip(frame, verdict.problem, verdict.kind)
+            return self._skip(frame, channel, verdict.problem, verdict.kind)
         self.buffer.add_image_observation(anchor, verdict.observation)
-        self.pacing = self.pacing.applied(t)
+        channel.pacing = channel.pacing.applied(t)
         self.num_images_applied += 1
         return True
 
-    def _skip(self, frame: DepthFrame, problem: str, kind: str) -> bool:
+    def _skip(self, frame: DepthFrame, channel: CameraChannel, problem: str,
+              kind: str) -> bool:
+        if len(self.channels) > 1:
+            problem = f"(camera '{channel.name}') {problem}"
         self.warnings.warn(kind, f"image {frame.sequence} skipped: {problem}")
         self.num_images_skipped += 1
         return False

@@ -70,9 +70,10 @@ def test_limit_check_names_the_joint():
 
 def test_every_preset_is_valid_and_within_joint_limits():
     presets = list_presets()
-    # 15 sequences (12 of the paper, two heavy occlusions, one model mismatch) x 7 biases
-    # (none, constant, time-varying, ramp, random walks of 1, 3 and 6 deg/sqrt(s)).
-    assert len(presets) == 105
+    # 17 sequences (12 of the paper, two heavy occlusions, one model mismatch, two with a
+    # second camera) x 7 biases (none, constant, time-varying, ramp, random walks of 1, 3
+    # and 6 deg/sqrt(s)).
+    assert len(presets) == 119
     model = build_tracker_model(load_scenario("static/none").resolved_robot_config())
     names = model.robot_joint_names
     lower = model.plant.GetPositionLowerLimits()[:len(names)]

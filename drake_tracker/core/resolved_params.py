@@ -67,6 +67,20 @@ class ResolvedParams:
     estimate_camera_offset: bool
     buffer_horizon_s: float
     max_interpolation_gap_s: float
+    #: (camera name, its blocks) of each camera, in the model's order: an image of a
+    #: camera moves the robot joints and that camera's six virtual joints only. Empty:
+    #: ``blocks`` for the one camera.
+    camera_blocks: tuple[tuple[str, tuple[np.ndarray, ...]], ...] = ()
+
+    def blocks_for(self, camera: str | None) -> tuple[np.ndarray, ...]:
+        """The CPF blocks of camera ``camera``'s images (None: ``blocks``)."""
+        if camera is None or not self.camera_blocks:
+            return self.blocks
+        for name, blocks in self.camera_blocks:
+            if name == camera:
+                return blocks
+        raise ValueError(f"unknown camera '{camera}': the parameters were resolved for "
+                         f"the cameras {[name for name, _ in self.camera_blocks]}")
 
     @property
     def robot_joint_indices(self) -> np.ndarray:

@@ -36,17 +36,19 @@ if TYPE_CHECKING:
 QUICK_SEQUENCES = ("s-full-arm", "s-head-arm", "arm++", "in-out-in", "occlusion")
 #: Further quick cases (sequence, bias): heavy and lasting occlusion, a bias ramp, a
 #: world robot that is not exactly the tracker's model, and biases that drift as random
-#: walks of 1, 3 and 6 deg/sqrt(s).
+#: walks of 1, 3 and 6 deg/sqrt(s); and the lasting occlusion and in-out-in with a second
+#: camera that sees the arm when the first does not.
+BIASES = ("none", "constant", "time-varying")
 QUICK_EXTRA_CASES = (("occlusion-heavy", "constant"), ("occlusion-lasting", "constant"),
                      ("s-full-arm", "ramp"), ("s-full-arm-mismatch", "constant"),
                      ("s-full-arm", "random-walk-1"), ("s-full-arm", "random-walk-3"),
-                     ("s-full-arm", "random-walk-6"))
+                     ("s-full-arm", "random-walk-6"), ("occlusion-lasting-2cam", "constant"),
+                     *(("in-out-in-2cam", bias) for bias in BIASES))
 QUICK_DURATION_S = 10.0
 QUICK_IMAGE_INTERVAL_S = 0.1
 #: Seeds per case by default (each seed varies the simulation and the tracker).
 QUICK_SEEDS = 3
 FULL_SEEDS = 10
-BIASES = ("none", "constant", "time-varying")
 #: Errors are sampled every this many seconds.
 SAMPLE_PERIOD_S = 0.05
 #: The summary and box plots use the errors from this time on (s): the targets are

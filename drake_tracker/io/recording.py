@@ -6,7 +6,7 @@ R readings, I images of H x W pixels, T ground-truth samples):
 ========================== =============== ==============================================
 key                        shape / dtype    meaning
 ========================== =============== ==============================================
-``format_version``         () int           1
+``format_version``         () int           2 (1: one camera, without ``camera_names``)
 ``robot_config_yaml``      () str           the RobotConfig, as YAML
 ``scenario_yaml``          () str           the scenario that produced it, as YAML ('' if none)
 ``joint_names``            (n,) str         the measured joints, in reading order
@@ -23,6 +23,13 @@ key                        shape / dtype    meaning
 ``truth_X_CE``             (T, 4, 4)        true hand pose in the true camera frame
 ========================== =============== ==============================================
 
+The images, intrinsics and ``truth_camera_offset`` above are the first camera's (the
+camera of ``truth_X_CE``). Version 2 adds ``camera_names`` (C,) str, every camera's name,
+and for each further camera j = 1..C-1 ``camera{j}_image_capture_times_s``,
+``camera{j}_image_arrival_times_s``, ``camera{j}_depth_images_m``,
+``camera{j}_intrinsics`` and ``camera{j}_truth_camera_offset``, as the first camera's.
+A version 1 file reads as a run of one camera named ``camera``.
+
 Images are stored already subsampled (see ``image_stride`` of ``drake-tracker record``);
 the intrinsics are those of the stored images.
 """
@@ -38,7 +45,46 @@ import numpy as np
 
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: The versions :meth:`RecordedRun.load` reads.
+READABLE_VERSIONS = (1, 2)
+#: The name of the one camera of a version 1 run.
+FIRST_CAMERA_NAME = "camera"
+#: What each further camera stores (``camera{j}_<key>``), and the field it fills.
+_CAMERA_KEYS = {"image_capture_times_s": "capture_times_s",
+                "image_arrival_times_s": "arrival_times_s",
+                "depth_images_m": "depth_images_m",
+                "truth_camera_offset": "truth_camera_offset"}
+
+
+@dataclass
+class CameraImages:
+    """The images of one further camera of a run (the first camera's are the run's own
+    ``image_*``/``depth_images_m`` fields), with its intrinsics and true offset (T, 6)."""
+
+    name: str
+    intrinsics: CameraIntrinsics
+    capture_times_s: np.ndarray
+    arrival_times_s: np.ndarray
+    depth_images_m: np.ndarray
+    truth_camera_offset: np.ndarray
+
+    def validate(self, num_truth: int) -> None:
+        """Raises ValueError naming the camera and its first inconsistent field."""
+        count = len(self.capture_times_s)
+        cam = self.intrinsics
+        if len(self.arrival_times_s) != count:
+            raise ValueError(f"camera '{self.name}': arrival and capture times differ in "
+                             "length")
+        if np.any(self.arrival_times_s < self.capture_times_s):
+            raise ValueError(f"camera '{self.name}': an image arrives before it was captured")
+        if self.depth_images_m.shape != (count, cam.height, cam.width):
+            raise ValueError(f"camera '{self.name}': depth_images_m has shape "
+                             f"{self.depth_images_m.shape}, expected "
+                             f"{(count, cam.height, cam.width)} from its intrinsics")
+        if self.truth_camera_offset.shape != (num_truth, 6):
+            raise ValueError(f"camera '{self.name}': truth_camera_offset has shape "
+                             f"{self.truth_camera_offset.shape}, expected {(num_truth, 6)}")
 
 
 @dataclass
@@ -60,6 +106,15 @@ class RecordedRun:
     truth_X_CE: np.ndarray
     scenario_yaml: str = ""
     extra: dict = field(default_factory=dict)
+    #: The first camera's name (the images above are its images).
+    camera_name: str = FIRST_CAMERA_NAME
+    #: The further cameras' images, in the model's camera order.
+    other_cameras: list[CameraImages] = field(default_factory=list)
+
+    @property
+    def camera_names(self) -> list[str]:
+        """Every camera's name, the first first."""
+        return [self.camera_name] + [c.name for c in self.other_cameras]
 
     def __post_init__(self) -> None:
         self.validate()
@@ -98,6 +153,11 @@ class RecordedRun:
         ):
             if getattr(self, name).shape != shape:
                 raise ValueError(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
+        names = self.camera_names
+        if len(set(names)) != len(names):
+            raise ValueError(f"two cameras of the run have the same name: {names}")
+        for camera in self.other_cameras:
+            camera.validate(T)
 
     def images_in_arrival_order(self) -> tuple[np.ndarray, np.ndarray]:
         """(indices of the images whose arrival stamp is a finite time, in arrival order;
@@ -122,7 +182,10 @@ class RecordedRun:
             self, reading_times_s=ticks(self.reading_times_s),
             image_capture_times_s=ticks(self.image_capture_times_s),
             image_arrival_times_s=ticks(self.image_arrival_times_s),
-            truth_times_s=ticks(self.truth_times_s))
+            truth_times_s=ticks(self.truth_times_s),
+            other_cameras=[dataclasses.replace(c, capture_times_s=ticks(c.capture_times_s),
+                                               arrival_times_s=ticks(c.arrival_times_s))
+                           for c in self.other_cameras])
 
     def stamped_in_nanoseconds(self) -> RecordedRun:
         """:meth:`stamped_in` ns, as ROS stamps: a bag of it (``io/run_bag.py``) holds
@@ -162,9 +225,21 @@ class RecordedRun:
             truth_bias_rad=self.truth_bias_rad,
             truth_camera_offset=self.truth_camera_offset,
             truth_X_CE=self.truth_X_CE,
+            camera_names=np.array(self.camera_names),
+            **self._other_camera_arrays(),
         )
         # np.savez appends .npz when missing.
         return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+    def _other_camera_arrays(self) -> dict[str, np.ndarray]:
+        out = {}
+        for j, camera in enumerate(self.other_cameras, 1):
+            for key, name in _CAMERA_KEYS.items():
+                out[f"camera{j}_{key}"] = np.asarray(getattr(camera, name))
+            out[f"camera{j}_depth_images_m"] = out[f"camera{j}_depth_images_m"].astype(
+                np.float32)
+            out[f"camera{j}_intrinsics"] = camera.intrinsics.as_array()
+        return out
 
     @staticmethod
     def load(path: str | Path) -> RecordedRun:
@@ -185,9 +260,18 @@ class RecordedRun:
     def _load(path: str | Path) -> RecordedRun:
         with np.load(path, allow_pickle=False) as data:
             version = int(data["format_version"])
-            if version != FORMAT_VERSION:
-                raise ValueError(f"{path}: format_version {version}, expected {FORMAT_VERSION}")
+            if version not in READABLE_VERSIONS:
+                raise ValueError(f"{path}: format_version {version}, expected one of "
+                                 f"{READABLE_VERSIONS}")
+            names = [FIRST_CAMERA_NAME] if version == 1 else [
+                str(n) for n in data["camera_names"]]
+            others = [CameraImages(name=names[j], intrinsics=CameraIntrinsics.from_array(
+                data[f"camera{j}_intrinsics"]), **{field_name: data[f"camera{j}_{key}"]
+                                                   for key, field_name in _CAMERA_KEYS.items()})
+                      for j in range(1, len(names))]
             return RecordedRun(
+                camera_name=names[0],
+                other_cameras=others,
                 robot_config_yaml=str(data["robot_config_yaml"]),
                 scenario_yaml=str(data["scenario_yaml"]),
                 joint_names=[str(s) for s in data["joint_names"]],

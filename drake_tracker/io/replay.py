@@ -50,7 +50,7 @@ class ReplayResult:
     positions: np.ndarray  # (T, n) all model joints
     position_variances: np.ndarray
     biases: np.ndarray
-    camera_offsets: np.ndarray  # (T, 6)
+    camera_offsets: np.ndarray  # (T, 6 per camera), the model's camera order
     X_CE: np.ndarray  # (T, 4, 4)
     joint_names: list[str]
     num_images_applied: int
@@ -112,7 +112,11 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
     if list(run.joint_names) != list(model.robot_joint_names):
         raise ValueError(f"the run's joints {run.joint_names} differ from the model's "
                          f"{model.robot_joint_names}")
-    tracker = Tracker(model, run.camera_intrinsics, params)
+    if run.other_cameras:
+        tracker = Tracker(model, params=params, cameras={run.camera_name: run.camera_intrinsics} |
+                          {c.name: c.intrinsics for c in run.other_cameras})
+    else:
+        tracker = Tracker(model, run.camera_intrinsics, params)
     times = run.truth_times_s if sample_times_s is None else np.asarray(sample_times_s)
     sampler = _Sampler(times, model.num_joints)
     t_start = time.perf_counter()

@@ -66,6 +66,8 @@ class ImageEvent:
     sequence: int
     #: When it arrived (s, stream time); None: when the source yields it (see above).
     arrival_s: float | None = None
+    #: Which camera took it (``Tracker.add_image``'s ``camera``); None: the only one.
+    camera: str | None = None
 
 
 @dataclass(frozen=True)
@@ -153,7 +155,7 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
         if observer is not None:
             observer.before(frame.arrival_time_s, tracker)
         try:
-            tracker.add_image(frame)
+            tracker.add_image(frame, camera=image.camera)
         except ValueError as err:
             _count(counts.source_skipped, "unusable images")
             warnings.warn("unusable images", f"image {image.sequence} captured at "

@@ -49,10 +49,24 @@ def run_events(run: RecordedRun) -> Iterator[Event]:
                              f"not a time")
     readings = ((float(t), ReadingEvent(float(t), q))
                 for t, q in zip(run.reading_times_s, run.readings_rad))
+    several = bool(run.other_cameras)
     images = ((float(run.image_arrival_times_s[i]),
                ImageEvent(float(run.image_capture_times_s[i]), run.depth_images_m[i], int(i),
-                          float(run.image_arrival_times_s[i]))) for i in order)
-    yield from merge_by_time(readings, images)
+                          float(run.image_arrival_times_s[i]),
+                          run.camera_name if several else None)) for i in order)
+    yield from merge_by_time(readings, images, *(
+        _camera_images(camera) for camera in run.other_cameras))
+
+
+def _camera_images(camera) -> Iterator[tuple[float, ImageEvent]]:
+    """A further camera's images (``io/recording.CameraImages``), in arrival order (those
+    without a finite arrival are not played)."""
+    arrivals = np.asarray(camera.arrival_times_s, float)
+    for i in np.argsort(arrivals, kind="stable"):
+        if np.isfinite(arrivals[i]):
+            yield float(arrivals[i]), ImageEvent(float(camera.capture_times_s[i]),
+                                                 camera.depth_images_m[i], int(i),
+                                                 float(arrivals[i]), camera.name)
 
 
 class TruthSampler:

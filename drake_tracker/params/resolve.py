@@ -32,8 +32,18 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
     params = TrackerParams() if params is None else params
     validate_tracker_params(params)
     names = list(model.joint_names)
-    chain = camera_chain_joints(model)
-    noise = joint_noise_for(params, names, model.prismatic_joint_names)
+    virtual = model.virtual_joint_names
+    camera_chains = {c.name: camera_chain_joints(model.for_camera(c.name))
+                     for c in model.cameras}
+    per_camera = []  # each camera's blocks (see other_cameras_joints)
+    for camera in model.cameras:
+        own = camera.virtual_joint_names
+        per_camera.append((camera.name, tuple(resolve_blocks(
+            params, names, camera_chains[camera.name], own,
+            other_cameras_joints(model, camera.name, camera_chains)))))
+    chains = {n for c in camera_chains.values() for n in c}
+    chain = [n for n in names if n in chains]
+    noise = joint_noise_for(params, names, model.prismatic_joint_names, virtual)
     unknown = sorted(set(params.initial_positions_rad) - set(names))
     if unknown:
         raise ValueError(f"initial_positions_rad: unknown joint names {unknown}")
@@ -67,8 +77,9 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
     )
     return ResolvedParams(
         joints=joints,
-        blocks=tuple(resolve_blocks(params, names, chain)),
+        blocks=per_camera[0][1],
         camera_chain=tuple(chain),
+        camera_blocks=tuple(per_camera),
         image=params.image,
         health=params.health,
         timestamps=params.timestamps,
@@ -93,8 +104,26 @@ def kalman_params(noise: list[JointNoise], names: list[str]) -> KalmanBankParams
     )
 
 
+def other_cameras_joints(model: TrackerModel, camera: str,
+                         camera_chains: dict[str, list[str]]) -> list[str]:
+    """The joints that camera ``camera``'s images leave as they are: every other camera's
+    six offset joints, and the robot joints that move another camera and not this one
+    (``camera_chains``: each camera's ``camera_chain_joints``; e.g. a pan-tilt head's
+    joints, for a camera on a post). Those joints are the other camera's frame: from
+    this camera they are seen on a few pixels (a head across the room), and what its
+    images make of them lands on the other camera's frame with nothing to correct it
+    while that camera cannot see the arm. Measured on in-out-in-2cam/none seed 0, the
+    post camera's images walked the head's pan 4 deg (true 0) in 3 s with the hand out
+    of the head camera's view: the hand in the head camera's frame went 60-100 mm off."""
+    own = set(model.camera(camera).virtual_joint_names) | set(camera_chains[camera])
+    others = [n for c in model.cameras if c.name != camera
+              for n in (*camera_chains[c.name], *c.virtual_joint_names)]
+    return [n for n in model.joint_names if n in set(others) - own]
+
+
 def camera_chain_joints(model: TrackerModel) -> list[str]:
-    """The robot joints that move the camera (e.g. a pan-tilt head), base first."""
+    """The robot joints that move the (active: ``TrackerModel.for_camera``) camera (e.g.
+    a pan-tilt head), base first."""
     plant = model.plant
     camera_body = model.nominal_camera_frame.body().index()
     chain = []
@@ -106,8 +135,10 @@ def camera_chain_joints(model: TrackerModel) -> list[str]:
 
 
 def joint_noise_for(params: TrackerParams, joint_names: list[str],
-                    prismatic: Collection[str] = ()) -> list[JointNoise]:
-    """The JointNoise of each joint: its override, else the virtual joints', the
+                    prismatic: Collection[str] = (),
+                    virtual: Collection[str] = VIRTUAL_JOINT_NAMES) -> list[JointNoise]:
+    """The JointNoise of each joint: its override, else the virtual joints' (``virtual``:
+    every camera's, ``TrackerModel.virtual_joint_names``), the
     prismatic joints' (``prismatic``: the robot's, ``TrackerModel.prismatic_joint_names``)
     or the robot joints' default; unknown override names raise ValueError."""
     unknown = sorted(set(params.kalman.overrides) - set(joint_names))
@@ -118,7 +149,7 @@ def joint_noise_for(params: TrackerParams, joint_names: list[str],
     for name in joint_names:
         if name in params.kalman.overrides:
             out.append(params.kalman.overrides[name])
-        elif name in VIRTUAL_JOINT_NAMES:
+        elif name in virtual:
             out.append(params.kalman.virtual_joints)
         elif name in prismatic:
             out.append(params.kalman.prismatic_joints)
@@ -128,8 +159,12 @@ def joint_noise_for(params: TrackerParams, joint_names: list[str],
 
 
 def resolve_blocks(params: TrackerParams, joint_names: list[str],
-                   camera_chain: list[str] = ()) -> list[np.ndarray]:
-    """Index arrays of the CPF blocks. Without ``estimate_camera_offset`` the virtual
+                   camera_chain: list[str] = (),
+                   virtual: Collection[str] = VIRTUAL_JOINT_NAMES,
+                   excluded: Collection[str] = ()) -> list[np.ndarray]:
+    """Index arrays of the CPF blocks of one camera's images: ``virtual`` are its six
+    virtual joints, ``excluded`` the other cameras' (in no block: an image leaves the
+    other cameras' offsets as they are). Without ``estimate_camera_offset`` the virtual
     joints are left out of every block (they stay at their prior, 0).
 
     ``per-joint`` samples the camera first: the robot joints that move the camera
@@ -138,8 +173,10 @@ def resolve_blocks(params: TrackerParams, joint_names: list[str],
     the arm's base joints absorb the camera's error, and the estimate drifts.
     """
     im = params.image
-    virtual = [n for n in joint_names if n in VIRTUAL_JOINT_NAMES]
-    robot = [n for n in joint_names if n not in VIRTUAL_JOINT_NAMES]
+    excluded = set(excluded)
+    own = set(virtual)
+    virtual = [n for n in joint_names if n in own]
+    robot = [n for n in joint_names if n not in own and n not in excluded]
     if im.blocks == "per-joint":
         chain = [n for n in robot if n in camera_chain]
         rest = [n for n in robot if n not in camera_chain]
@@ -158,7 +195,7 @@ def resolve_blocks(params: TrackerParams, joint_names: list[str],
                     raise ValueError(f"image.block_joints: unknown joint '{name}'; the "
                                      f"model's joints are {joint_names}")
     if not params.estimate_camera_offset:
-        groups = [[n for n in b if n not in VIRTUAL_JOINT_NAMES] for b in groups]
+        groups = [[n for n in b if n not in own] for b in groups]
     groups = [b for b in groups if b]
     return [np.array([joint_names.index(n) for n in b], int) for b in groups]
 

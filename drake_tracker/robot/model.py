@@ -6,15 +6,18 @@ for a particular robot. A vendor's package loads as it ships: ``package://`` URI
 resolve through Drake's PackageMap, STL/DAE meshes are converted once to OBJ
 (:mod:`drake_tracker.robot.vendor`), and the camera and end-effector frames can be declared
 in the :class:`RobotConfig` as a parent frame plus an offset.
+
+The configuration (``RobotConfig``, ``CameraMount``, the presets) is
+:mod:`drake_tracker.robot.config`, re-exported here.
 """
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import PackageMap, Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, MultibodyPlant
 from pydrake.multibody.tree import (
@@ -29,6 +32,20 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_tracker.robot.config import (
+    DEFAULT_CAMERA_NAME,
+    ESTIMATED_CAMERA_BODY_NAME,
+    OFFSET_AXES,
+    ROBOT_PRESETS,
+    VIRTUAL_JOINT_NAMES,
+    VIRTUAL_MODEL_INSTANCE_NAME,
+    CameraMount,
+    FrameOffset,
+    RobotConfig,
+    load_robot_config,
+    robot_preset,
+    virtual_joint_names_of,
+)
 from drake_tracker.robot.vendor import (
     PACKAGE_SCHEMES,
     drake_loadable_model,
@@ -36,20 +53,6 @@ from drake_tracker.robot.vendor import (
     resolve_uri,
 )
 
-#: Names of the six virtual joints, in chain order: prismatic x, y, z, then revolute
-#: about x, y, z, all expressed in the nominal camera frame.
-VIRTUAL_JOINT_NAMES: tuple[str, ...] = (
-    "camera_offset_x",
-    "camera_offset_y",
-    "camera_offset_z",
-    "camera_offset_rx",
-    "camera_offset_ry",
-    "camera_offset_rz",
-)
-#: Model instance that holds the virtual joints and their bodies.
-VIRTUAL_MODEL_INSTANCE_NAME = "camera_offset"
-#: Body whose frame is the estimated (or, in simulation, the true) camera frame.
-ESTIMATED_CAMERA_BODY_NAME = "camera_offset_estimated_camera"
 #: Package name under which the shipped models are known (``package://drake_tracker_models``).
 SHIPPED_MODELS_PACKAGE = "drake_tracker_models"
 
@@ -80,83 +83,6 @@ def resolve_model_path(model_file: str, package_map: PackageMap | None = None) -
     )
 
 
-@dataclass
-class FrameOffset:
-    """A frame added to the robot model: a fixed pose relative to one of its frames."""
-
-    #: Name of an existing frame of the model (a link, or a frame the file declares).
-    parent: str = ""
-    #: Position of the new frame's origin in the parent frame (m).
-    xyz_m: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    #: Orientation relative to the parent: roll, pitch, yaw about the parent's fixed
-    #: x, y, z axes (deg), as URDF's ``rpy``.
-    rpy_deg: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-
-    def transform(self) -> RigidTransform:
-        """``X_parent_frame``."""
-        if len(self.xyz_m) != 3 or len(self.rpy_deg) != 3:
-            raise ValueError(f"FrameOffset: xyz_m and rpy_deg need 3 values each, got "
-                             f"{self.xyz_m} and {self.rpy_deg}")
-        if not np.all(np.isfinite(self.xyz_m + self.rpy_deg)):
-            raise ValueError(f"FrameOffset: values must be finite, got {self.xyz_m}, "
-                             f"{self.rpy_deg}")
-        return RigidTransform(RollPitchYaw(np.radians(self.rpy_deg)), np.array(self.xyz_m))
-
-
-@dataclass
-class RobotConfig:
-    """Which robot to load and which of its frames matter to the tracker.
-
-    Loadable from YAML with ``pydrake.common.yaml.yaml_load_typed`` (or
-    :func:`load_robot_config`).
-    """
-
-    #: URDF, SDF or Drake model directives (``.dmd.yaml``) file: a path, a
-    #: ``package://`` URI, or the name of a model under ``models/``.
-    model_file: str = "apollo.sdf"
-    #: Name of the depth camera's frame (Drake camera convention: +z along the optical
-    #: axis, +x right, +y down): a frame of the model or one of ``added_frames``. Its
-    #: pose is the *nominal* one.
-    camera_frame: str = "camera_optical"
-    #: Name of the end-effector frame whose pose in the camera frame is the output.
-    end_effector_frame: str = "end_effector"
-    #: Frames to add to the model by name, so that the vendor's file is never edited.
-    added_frames: dict[str, FrameOffset] = field(default_factory=dict)
-    #: ``package://NAME`` -> folder, for packages the model refers to.
-    package_paths: dict[str, str] = field(default_factory=dict)
-    #: Folders searched (recursively) for ``package.xml`` files. The package that holds
-    #: ``model_file`` is found without this.
-    package_folders: list[str] = field(default_factory=list)
-    #: The robot's model instance when the file adds several with joints (directives).
-    model_instance: str = ""
-    #: Where converted STL/DAE meshes go; empty: ``mesh_cache.default_cache_dir()``.
-    mesh_cache_dir: str = ""
-
-
-def load_robot_config(yaml_text: str) -> RobotConfig:
-    """A RobotConfig from YAML text; unknown fields are an error naming them."""
-    from pydrake.common.yaml import yaml_load_typed
-
-    return yaml_load_typed(schema=RobotConfig, data=yaml_text)
-
-
-#: Robot presets shipped with the package.
-ROBOT_PRESETS: dict[str, RobotConfig] = {
-    "apollo": RobotConfig(),
-    "arm6": RobotConfig(
-        model_file="arm6_on_stand.urdf",
-        camera_frame="camera_optical",
-        end_effector_frame="tool_center",
-    ),
-}
-
-
-def robot_preset(name: str) -> RobotConfig:
-    """A copy of a named robot preset; unknown names raise a ValueError listing the known."""
-    if name not in ROBOT_PRESETS:
-        raise ValueError(f"unknown robot preset '{name}'; known: {sorted(ROBOT_PRESETS)}")
-    return dataclasses.replace(ROBOT_PRESETS[name])
-
 
 def add_robot(plant: MultibodyPlant, config: RobotConfig) -> ModelInstanceIndex:
     """Parses the robot model into ``plant`` (not finalized), adds ``config.added_frames``
@@ -179,8 +105,10 @@ def add_robot(plant: MultibodyPlant, config: RobotConfig) -> ModelInstanceIndex:
         parent = _find_frame(plant, instances, offset.parent, f"added_frames[{name}].parent",
                              path)
         plant.AddFrame(FixedOffsetFrame(name, parent, offset.transform(), instance))
-    for field_name in ("camera_frame", "end_effector_frame"):
-        name = getattr(config, field_name)
+    required = [("camera_frame", config.camera_frame),
+                ("end_effector_frame", config.end_effector_frame)]
+    required += [(f"cameras[{m.name}].frame", m.frame) for m in config.camera_mounts()]
+    for field_name, name in required:
         if not plant.HasFrameNamed(name, instance):
             # A frame of another instance (directives): alias it in the robot's instance.
             frame = _find_frame(plant, instances, name, field_name, path)
@@ -231,24 +159,28 @@ def _weld_floating_roots(plant: MultibodyPlant, instance: ModelInstanceIndex) ->
 
 
 def add_virtual_camera_joints(
-    plant: MultibodyPlant, camera_frame: Frame, mass_kg: float = 1e-3
+    plant: MultibodyPlant, camera_frame: Frame, mass_kg: float = 1e-3,
+    camera: str = DEFAULT_CAMERA_NAME,
 ) -> tuple[list[str], Frame]:
     """Inserts six virtual joints between ``camera_frame`` and a new camera body.
 
     The chain is prismatic x, y, z, then revolute about x, y, z, all with axes in the
     nominal camera frame, so at zero positions the new body's frame coincides with
     ``camera_frame``, and in general ``X_nominal_true = p(x,y,z) * Rx * Ry * Rz``.
-    Returns the joint names (``VIRTUAL_JOINT_NAMES``) and the new camera body frame.
+    Returns the joint names (``virtual_joint_names_of(camera)``: ``VIRTUAL_JOINT_NAMES``
+    for the default camera) and the new camera body frame, of the body
+    ``<camera>_offset_estimated_camera`` in the model instance ``<camera>_offset``.
     The tiny bodies have a small mass only so that a continuous plant stays regular.
     """
-    instance = plant.AddModelInstance(VIRTUAL_MODEL_INSTANCE_NAME)
+    names = virtual_joint_names_of(camera)
+    instance = plant.AddModelInstance(f"{camera}_offset")
     inertia = SpatialInertia(
         mass=mass_kg, p_PScm_E=np.zeros(3), G_SP_E=UnitInertia.SolidSphere(0.01)
     )
     parent = camera_frame
     axes = np.eye(3)
-    for k, name in enumerate(VIRTUAL_JOINT_NAMES):
-        body_name = ESTIMATED_CAMERA_BODY_NAME if k == 5 else f"{name}_body"
+    for k, name in enumerate(names):
+        body_name = f"{camera}_offset_estimated_camera" if k == 5 else f"{name}_body"
         body = plant.AddRigidBody(body_name, instance, inertia)
         axis = axes[k % 3]
         if k < 3:
@@ -257,7 +189,19 @@ def add_virtual_camera_joints(
             joint = RevoluteJoint(name, parent, body.body_frame(), axis)
         plant.AddJoint(joint)
         parent = body.body_frame()
-    return list(VIRTUAL_JOINT_NAMES), parent
+    return list(names), parent
+
+
+def add_camera_chains(plant: MultibodyPlant, instance: ModelInstanceIndex,
+                      config: RobotConfig) -> list[tuple[CameraMount, Frame, Frame]]:
+    """The virtual joints of each of ``config``'s cameras (``add_virtual_camera_joints``),
+    in order: (mount, nominal frame, estimated frame) of each."""
+    chains = []
+    for mount in config.camera_mounts():
+        nominal = plant.GetFrameByName(mount.frame, instance)
+        _, frame = add_virtual_camera_joints(plant, nominal, camera=mount.name)
+        chains.append((mount, nominal, frame))
+    return chains
 
 
 def camera_offset_transform(offset: np.ndarray) -> np.ndarray:
@@ -307,11 +251,26 @@ def default_home_positions(plant: MultibodyPlant,
     return home
 
 
+@dataclass(frozen=True)
+class ModelCamera:
+    """One depth camera of a :class:`TrackerModel`: its nominal frame (from the robot
+    model), its estimated frame (after its six virtual joints) and those joints."""
+
+    name: str
+    nominal_frame: Frame
+    frame: Frame
+    #: ``<name>_offset_x`` ... ``<name>_offset_rz``.
+    virtual_joint_names: tuple[str, ...]
+
+
 @dataclass
 class TrackerModel:
-    """The tracker's model: the robot plus the six virtual camera joints, finalized.
+    """The tracker's model: the robot plus six virtual joints per camera, finalized.
 
     ``diagram`` holds ``plant`` and ``scene_graph`` so that geometry can be queried.
+    ``camera_frame`` and ``nominal_camera_frame`` are those of the model's active camera:
+    the first (the camera of the output) unless the model is one camera's view
+    (:meth:`for_camera`, what renders that camera's images).
     """
 
     config: RobotConfig
@@ -325,6 +284,39 @@ class TrackerModel:
     nominal_camera_frame: Frame
     camera_frame: Frame
     end_effector_frame: Frame
+    #: Every camera, in ``RobotConfig.camera_mounts()`` order (empty: the one camera of
+    #: ``camera_frame``, named ``camera``).
+    cameras: tuple[ModelCamera, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.cameras:
+            self.cameras = (ModelCamera(DEFAULT_CAMERA_NAME, self.nominal_camera_frame,
+                                        self.camera_frame, VIRTUAL_JOINT_NAMES),)
+
+    @property
+    def camera_names(self) -> list[str]:
+        """The cameras' names, the first being the camera of the output."""
+        return [c.name for c in self.cameras]
+
+    def camera(self, name: str) -> ModelCamera:
+        """The camera ``name``; ValueError naming the model's cameras for another."""
+        for camera in self.cameras:
+            if camera.name == name:
+                return camera
+        raise ValueError(f"unknown camera '{name}': the model's cameras are "
+                         f"{self.camera_names} (RobotConfig.cameras)")
+
+    def for_camera(self, name: str) -> "TrackerModel":
+        """This model seen from camera ``name``: ``camera_frame`` and
+        ``nominal_camera_frame`` are that camera's (the plant and joints are shared)."""
+        camera = self.camera(name)
+        return dataclasses.replace(self, nominal_camera_frame=camera.nominal_frame,
+                                   camera_frame=camera.frame)
+
+    def camera_joint_indices(self, name: str) -> np.ndarray:
+        """Indices of camera ``name``'s six virtual joints in ``joint_names``."""
+        return np.array([self.joint_names.index(n)
+                         for n in self.camera(name).virtual_joint_names])
 
     @property
     def num_joints(self) -> int:
@@ -332,9 +324,15 @@ class TrackerModel:
         return len(self.joint_names)
 
     @property
+    def virtual_joint_names(self) -> list[str]:
+        """Every camera's six virtual joints, camera after camera."""
+        return [n for c in self.cameras for n in c.virtual_joint_names]
+
+    @property
     def virtual_joint_indices(self) -> np.ndarray:
-        """Indices of the six virtual camera joints in ``joint_names``."""
-        return np.array([self.joint_names.index(n) for n in VIRTUAL_JOINT_NAMES])
+        """Indices of the virtual camera joints in ``joint_names`` (six per camera, camera
+        after camera: with one camera, its six)."""
+        return np.array([self.joint_names.index(n) for n in self.virtual_joint_names])
 
     @property
     def robot_joint_indices(self) -> np.ndarray:
@@ -344,7 +342,8 @@ class TrackerModel:
     @property
     def robot_joint_names(self) -> list[str]:
         """The robot's own joints in position order: the order of the encoder readings."""
-        return [n for n in self.joint_names if n not in VIRTUAL_JOINT_NAMES]
+        virtual = set(self.virtual_joint_names)
+        return [n for n in self.joint_names if n not in virtual]
 
     @property
     def prismatic_joint_names(self) -> list[str]:
@@ -357,14 +356,15 @@ class TrackerModel:
 
 
 def build_tracker_model(config: RobotConfig) -> TrackerModel:
-    """Loads ``config``'s robot, adds the virtual camera joints, and finalizes."""
+    """Loads ``config``'s robot, adds each camera's virtual joints, and finalizes."""
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     instance = add_robot(plant, config)
-    nominal = plant.GetFrameByName(config.camera_frame, instance)
-    _, camera = add_virtual_camera_joints(plant, nominal)
+    chains = add_camera_chains(plant, instance, config)
     plant.Finalize()
     diagram = builder.Build()
+    cameras = tuple(ModelCamera(m.name, nominal, frame, virtual_joint_names_of(m.name))
+                    for m, nominal, frame in chains)
     return TrackerModel(
         config=config,
         diagram=diagram,
@@ -372,7 +372,16 @@ def build_tracker_model(config: RobotConfig) -> TrackerModel:
         scene_graph=scene_graph,
         robot_instance=instance,
         joint_names=joint_names(plant),
-        nominal_camera_frame=nominal,
-        camera_frame=camera,
+        nominal_camera_frame=cameras[0].nominal_frame,
+        camera_frame=cameras[0].frame,
         end_effector_frame=plant.GetFrameByName(config.end_effector_frame, instance),
+        cameras=cameras,
     )
+
+
+__all__ = ["DEFAULT_CAMERA_NAME", "ESTIMATED_CAMERA_BODY_NAME", "OFFSET_AXES", "ROBOT_PRESETS",
+           "VIRTUAL_JOINT_NAMES", "VIRTUAL_MODEL_INSTANCE_NAME", "CameraMount", "FrameOffset",
+           "ModelCamera", "RobotConfig", "TrackerModel", "add_camera_chains", "add_robot",
+           "add_virtual_camera_joints", "build_tracker_model", "camera_offset_transform",
+           "default_home_positions", "joint_names", "load_robot_config", "models_dir",
+           "resolve_model_path", "robot_preset", "virtual_joint_names_of"]

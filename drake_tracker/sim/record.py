@@ -35,7 +35,7 @@ from pydrake.systems.framework import DiagramBuilder, OutputPort
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_tracker.core.sensors.camera import subsample
-from drake_tracker.io.recording import RecordedRun
+from drake_tracker.io.recording import CameraImages, RecordedRun
 from drake_tracker.progress import SimulatedSecondsBar
 from drake_tracker.sim.scenario.load import Scenario, load_scenario, validate_scenario
 from drake_tracker.sim.world import AddSimulatedWorld, SimulatedWorld
@@ -74,12 +74,13 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     if not duration > 0:
         raise ValueError(f"duration_s must be > 0, got {duration}")
 
-    # The camera delivers every render_stride-th pixel already: the rest of the stride.
-    render_stride = scenario.camera.render_stride
-    if image_stride % render_stride:
-        raise ValueError(f"image_stride {image_stride} is not a multiple of "
-                         f"camera.render_stride {render_stride}")
-    frame_stride = image_stride // render_stride
+    # Each camera delivers every render_stride-th pixel already: the rest of the stride.
+    frame_strides = {}
+    for camera in scenario.resolved_cameras():
+        if image_stride % camera.render_stride:
+            raise ValueError(f"image_stride {image_stride} is not a multiple of camera "
+                             f"'{camera.name}''s render_stride {camera.render_stride}")
+        frame_strides[camera.name] = image_stride // camera.render_stride
     builder = DiagramBuilder()
     world = AddSimulatedWorld(builder, scenario)
     probes = (add_systems(builder, world) if add_systems else None) or {}
@@ -96,9 +97,10 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
         port_context = port.get_system().GetMyContextFromRoot(context)
         return lambda: port.Eval(port_context)
 
-    frame_now = reader(world.port("depth_frame"))
+    frame_now = {name: reader(world.depth_port(name)) for name in world.cameras}
     truth_now = {key: reader(world.port(name)) for key, name in (
         ("q", "true_position"), ("offset", "true_camera_offset"), ("X_CE", "true_X_CE"))}
+    truth_now["offsets"] = reader(world.truth.GetOutputPort("true_camera_offsets"))
     probe_now = {name: reader(port) for name, port in probes.items()}
 
     h = world.encoder_period_s
@@ -111,10 +113,10 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     stops = np.append(stops, duration + 0.5 * min(h, world.camera_period_s))
     is_truth = np.isin(stops, truth_grid)
 
-    captures, arrivals, images = [], [], []
-    truth = {k: [] for k in ("t", "q", "offset", "X_CE")}
+    recorded = {name: ([], [], []) for name in world.cameras}  # captures, arrivals, images
+    truth = {k: [] for k in ("t", "q", "offset", "X_CE", "offsets")}
     extra = {name: [] for name in probes}
-    last_seq = -1
+    last_seq = dict.fromkeys(world.cameras, -1)
     start = time.perf_counter()
     def sample_truth_now(t: float) -> None:
         truth["t"].append(t)
@@ -132,14 +134,18 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
         if sample_truth and t == 0.0:
             sample_truth_now(0.0)
         simulator.AdvanceTo(t)
-        frame = frame_now()
-        if frame.sequence != last_seq and not frame.is_empty:
-            if frame.sequence != last_seq + 1:
-                raise RuntimeError(f"missed depth images {last_seq + 1}..{frame.sequence - 1}")
-            last_seq = frame.sequence
-            captures.append(frame.capture_time_s)
-            arrivals.append(frame.arrival_time_s)
-            images.append(np.array(subsample(frame.depth_m, frame_stride), np.float32))
+        for name, now in frame_now.items():
+            frame = now()
+            if frame.sequence != last_seq[name] and not frame.is_empty:
+                if frame.sequence != last_seq[name] + 1:
+                    raise RuntimeError(f"camera '{name}' missed depth images "
+                                       f"{last_seq[name] + 1}..{frame.sequence - 1}")
+                last_seq[name] = frame.sequence
+                captures, arrivals, images = recorded[name]
+                captures.append(frame.capture_time_s)
+                arrivals.append(frame.arrival_time_s)
+                images.append(np.array(subsample(frame.depth_m, frame_strides[name]),
+                                       np.float32))
         if sample_truth and t > 0.0:
             sample_truth_now(t)
     bar.close()
@@ -153,7 +159,17 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
     latest = np.clip(np.searchsorted(reading_times, truth_times + 1e-9, side="right") - 1,
                      0, None)
     truth_bias = np.array(biases, float).reshape(-1, len(world.robot_joint_names))[latest]
-    intrinsics = world.intrinsics.subsampled(frame_stride)
+    stored = {name: camera.intrinsics.subsampled(frame_strides[name])
+              for name, camera in world.cameras.items()}
+    names = list(world.cameras)
+    offsets = np.array(truth["offsets"], float).reshape(len(truth_times), -1)
+    others = [CameraImages(name, stored[name], np.array(recorded[name][0], float),
+                           np.array(recorded[name][1], float),
+                           np.array(recorded[name][2], np.float32).reshape(
+                               -1, stored[name].height, stored[name].width),
+                           offsets[:, 6 * j:6 * j + 6]) for j, name in enumerate(names)][1:]
+    captures, arrivals, images = recorded[names[0]]
+    intrinsics = stored[names[0]]
     n = len(world.robot_joint_names)
     run = RecordedRun(
         robot_config_yaml=yaml_dump(dataclasses.asdict(world.robot_config)),
@@ -171,6 +187,8 @@ def simulate_and_record(scenario: Scenario, duration_s: float | None = None,
         truth_camera_offset=np.array(truth["offset"], float).reshape(-1, 6),
         truth_X_CE=np.array(truth["X_CE"], float).reshape(-1, 4, 4),
         scenario_yaml=yaml_dump_typed(scenario),
+        camera_name=names[0],
+        other_cameras=others,
     )
     run.extra.update({name: np.array(v) for name, v in extra.items()})
     run.extra["wall_time_s"] = wall

@@ -13,8 +13,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import MultibodyForces
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-from drake_tracker.robot.model import VIRTUAL_JOINT_NAMES
-from drake_tracker.sim.scenario.config import Scenario
+from drake_tracker.robot.model import virtual_joint_names_of
+from drake_tracker.sim.scenario.config import CameraConfig, Scenario
 from drake_tracker.sim.scenario.validation import require
 from drake_tracker.sim.trajectories import JointTrajectory
 
@@ -30,10 +30,13 @@ def position_joint_names(plant: MultibodyPlant) -> list[str]:
     return [j.name() for j in joints]
 
 
-def offset_gain_matrix(scenario: Scenario, robot_joint_names: list[str]) -> np.ndarray:
-    """(6, n) gains of the configuration-dependent camera offset (per rad of each joint)."""
+def offset_gain_matrix(scenario: Scenario, robot_joint_names: list[str],
+                       camera: CameraConfig | None = None) -> np.ndarray:
+    """(6, n) gains of the configuration-dependent offset of ``camera`` (default:
+    ``scenario.camera``), per rad of each joint."""
+    camera = scenario.camera if camera is None else camera
     G = np.zeros((6, len(robot_joint_names)))
-    for name, gains in scenario.camera.offset_gain_per_rad.items():
+    for name, gains in camera.offset_gain_per_rad.items():
         require(name in robot_joint_names, "camera.offset_gain_per_rad", name,
                 f"no such joint; joints: {robot_joint_names}")
         G[:, robot_joint_names.index(name)] = gains
@@ -48,14 +51,17 @@ class ReferenceMotion:
         self._trajectory = trajectory
         names = position_joint_names(plant)
         self._robot_idx = np.array([names.index(n) for n in robot_joint_names])
-        self._virtual_idx = np.array([names.index(n) for n in VIRTUAL_JOINT_NAMES])
-        self._offset = np.asarray(scenario.camera.offset, float)
-        self._gains = offset_gain_matrix(scenario, robot_joint_names)
+        cameras = scenario.resolved_cameras()
+        self._virtual_idx = [np.array([names.index(n) for n in virtual_joint_names_of(c.name)])
+                             for c in cameras]
+        self._offsets = [np.asarray(c.offset, float) for c in cameras]
+        self._gains = [offset_gain_matrix(scenario, robot_joint_names, c) for c in cameras]
         self.num_positions = plant.num_positions()
 
-    def camera_offset(self, robot_q: np.ndarray) -> np.ndarray:
-        """(6,) true virtual joint values for robot joint angles ``robot_q``."""
-        return self._offset + self._gains @ np.asarray(robot_q, float)
+    def camera_offset(self, robot_q: np.ndarray, camera: int = 0) -> np.ndarray:
+        """(6,) true virtual joint values of the ``camera``-th camera (the first: the
+        one camera) for robot joint angles ``robot_q``."""
+        return self._offsets[camera] + self._gains[camera] @ np.asarray(robot_q, float)
 
     def velocities(self, t: float, h: float = 1e-4) -> np.ndarray:
         """(nv,) central differences of ``positions`` (every joint is single-DoF)."""
@@ -66,7 +72,8 @@ class ReferenceMotion:
         q = np.zeros(self.num_positions)
         robot_q = self._trajectory.position_at(t)
         q[self._robot_idx] = robot_q
-        q[self._virtual_idx] = self.camera_offset(robot_q)
+        for k, virtual in enumerate(self._virtual_idx):
+            q[virtual] = self.camera_offset(robot_q, k)
         return q
 
 

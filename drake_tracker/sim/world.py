@@ -39,8 +39,8 @@ from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.robot.model import (
     RobotConfig,
     TrackerModel,
+    add_camera_chains,
     add_robot,
-    add_virtual_camera_joints,
     build_tracker_model,
 )
 from drake_tracker.sim.depth_camera import AddDepthCamera, DepthCameraSystem
@@ -64,6 +64,8 @@ from drake_tracker.sim.trajectories import (
 )
 from drake_tracker.sim.truth import TruthSystem
 
+#: The depth noise of the k-th camera is seeded with the scenario's seed + k times this.
+CAMERA_SEED_STEP = 7919
 #: Output ports of the simulated world, by name.
 WORLD_PORTS = ("true_position", "measured_position", "measurement_time", "true_bias",
                "true_camera_offset", "true_X_CE", "depth_frame", "plant_positions",
@@ -107,6 +109,14 @@ class SimulatedWorld:
     ports: dict[str, OutputPort] = field(default_factory=dict)
     #: True when ``plant`` is a simulated (discrete) subsystem of the Diagram.
     dynamic: bool = False
+    #: Every camera by name (the first is ``camera``), and their true frames.
+    cameras: dict[str, DepthCameraSystem] = field(default_factory=dict)
+    camera_frames: dict[str, Frame] = field(default_factory=dict)
+
+    def depth_port(self, camera: str) -> OutputPort:
+        """The ``depth_frame`` port of the camera named ``camera``."""
+        require_one_of(camera, list(self.cameras), "camera")
+        return self.cameras[camera].GetOutputPort("depth_frame")
 
     def set_initial_state(self, root_context: Context, time_s: float = 0.0) -> None:
         """Dynamic mode: puts the plant on the reference (positions and velocities at
@@ -128,8 +138,8 @@ class SimulatedWorld:
 
     @property
     def camera_period_s(self) -> float:
-        """Nominal time between depth images (s)."""
-        return 1.0 / self.scenario.camera.rate_hz
+        """Nominal time between depth images (s): of the fastest camera."""
+        return 1.0 / max(c.rate_hz for c in self.scenario.resolved_cameras())
 
 
 def resolved_biased_joints(scenario: Scenario, robot_joint_names: list[str]) -> list[str]:
@@ -185,8 +195,8 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
     instance = add_robot(plant, config)
     apply_model_mismatch(plant, scene_graph, instance, config.end_effector_frame,
                          scenario.model_mismatch)
-    nominal = plant.GetFrameByName(config.camera_frame, instance)
-    _, camera_frame = add_virtual_camera_joints(plant, nominal)
+    chains = add_camera_chains(plant, instance, config)
+    camera_frame = chains[0][2]
     if scenario.environment:
         add_environment(plant)
     plant.Finalize()
@@ -208,11 +218,18 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
 
     truth, encoders = add_truth_and_encoders(builder, plant, positions, scenario, robot_names,
                                              camera_frame, ee_frame, name)
-    camera_body = plant.GetBodyByName(camera_frame.body().name())
-    _, camera = AddDepthCamera(builder, scene_graph,
-                               plant.GetBodyFrameIdOrThrow(camera_body.index()),
-                               scenario.camera, scenario.seed, name=f"{name}_depth_camera",
-                               encoder_period_s=1.0 / scenario.encoders.rate_hz)
+    cameras, frames = {}, {}
+    for k, (camera_config, (_, _, frame)) in enumerate(zip(scenario.resolved_cameras(),
+                                                           chains)):
+        body = plant.GetBodyByName(frame.body().name())
+        # The first camera is the one camera of old (its name and its random streams).
+        _, cameras[camera_config.name] = AddDepthCamera(
+            builder, scene_graph, plant.GetBodyFrameIdOrThrow(body.index()),
+            camera_config.sensor(), scenario.seed + CAMERA_SEED_STEP * k,
+            name=f"{name}_depth_camera" + (f"_{camera_config.name}" if k else ""),
+            encoder_period_s=1.0 / scenario.encoders.rate_hz)
+        frames[camera_config.name] = frame
+    camera = next(iter(cameras.values()))
 
     ports = {
         "true_position": truth.GetOutputPort("true_position"),
@@ -231,7 +248,7 @@ def AddSimulatedWorld(builder: DiagramBuilder, scenario: Scenario,
         camera_frame=camera_frame, end_effector_frame=ee_frame,
         intrinsics=camera.intrinsics, trajectory=trajectory, reference=reference,
         encoders=encoders, camera=camera, truth=truth, occluders=occluders, ports=ports,
-        dynamic=dynamic)
+        dynamic=dynamic, cameras=cameras, camera_frames=frames)
 
 
 def build_simulated_world(scenario: Scenario) -> tuple[Diagram, SimulatedWorld]:
@@ -251,8 +268,9 @@ def add_truth_and_encoders(builder: DiagramBuilder, plant: MultibodyPlant,
                            ) -> tuple[TruthSystem, BiasedEncoders]:
     """The ground truth of the plant's ``positions`` (joint angles, camera offset, hand in
     the camera) and the biased encoders that read the true angles."""
-    truth = builder.AddNamedSystem(f"{name}_truth",
-                                   TruthSystem(plant, robot_names, camera_frame, ee_frame))
+    cameras = tuple(c.name for c in scenario.resolved_cameras())
+    truth = builder.AddNamedSystem(f"{name}_truth", TruthSystem(plant, robot_names,
+                                                                camera_frame, ee_frame, cameras))
     builder.Connect(positions, truth.GetInputPort("positions"))
     encoders = builder.AddNamedSystem(
         f"{name}_encoders",

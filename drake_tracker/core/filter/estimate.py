@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -41,6 +42,9 @@ class TrackerEstimate:
     X_CE: np.ndarray
     #: The hand in the robot model's world frame.
     X_WE: np.ndarray
+    #: Each camera's offset (name -> the six values of ``camera_offset``); the first
+    #: camera's is ``camera_offset``.
+    camera_offsets: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     #: Whether the images agree with the estimate (``core/robustness/health.py``): a controller
     #: should fall back to the encoders when ``health.state`` is ``HealthState.LOST``.
     health: TrackerHealth = TrackerHealth()
@@ -93,7 +97,7 @@ class PoseReadout:
 def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: float,
                          belief: np.ndarray) -> TrackerEstimate:
     """The :class:`TrackerEstimate` of a (5, n) ``belief`` at ``time_s``: its angle and bias
-    moments, the virtual joints' angle means as the camera offset, and the hand's poses
+    moments, the virtual joints' angle means as the cameras' offsets, and the hand's poses
     X_CE and X_WE (4, 4) at the mean angles."""
     X_CE, X_WE, _ = readout.poses(belief[MEAN_A])
     return TrackerEstimate(
@@ -103,7 +107,9 @@ def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: floa
         position_variances=belief[VAR_A].copy(),
         biases=belief[MEAN_B].copy(),
         bias_variances=belief[VAR_B].copy(),
-        camera_offset=belief[MEAN_A, model.virtual_joint_indices].copy(),
+        camera_offset=belief[MEAN_A, model.camera_joint_indices(model.camera_names[0])].copy(),
+        camera_offsets={c: belief[MEAN_A, model.camera_joint_indices(c)].copy()
+                        for c in model.camera_names},
         X_CE=X_CE[0],
         X_WE=X_WE[0],
     )

@@ -45,6 +45,7 @@ def validate_scenario(scenario: Scenario, check_model: bool = True) -> None:
     _check_trajectory(s.trajectory)
     _check_encoders(s.encoders)
     _check_camera(s.camera)
+    _check_cameras(s)
     if s.occluder.enabled:
         _check_occluder(legacy_occluder_spec(s.occluder), "occluder")
     for k, occluder in enumerate(s.occluders):
@@ -108,6 +109,21 @@ def _check_bias_profile(p: BiasProfile, where: str) -> None:
             "must increase by at least step_transition_s")
     require(p.kind != "steps" or len(times) > 0, f"{where}.step_times_s", times,
             "must list at least one step for kind 'steps'")
+
+
+def _check_cameras(s: Scenario) -> None:
+    """``cameras``: each a valid camera, the names distinct, ``camera`` mirroring the
+    first (``load.mirror_first_camera``)."""
+    names = [c.name for c in s.cameras]
+    for k, camera in enumerate(s.cameras):
+        require(bool(camera.name) and camera.name.replace("_", "").isalnum(),
+                f"cameras[{k}].name", camera.name, "must be a word (letters, digits, _)")
+        require(names.count(camera.name) == 1, f"cameras[{k}].name", camera.name,
+                "two cameras have this name; every camera needs its own")
+        _check_camera(camera)
+    require(not s.cameras or s.camera == s.cameras[0].sensor(), "camera", "",
+            "differs from cameras[0]: with cameras, give the first camera there and leave "
+            "camera out (load_scenario mirrors it)")
 
 
 def _check_camera(c: CameraConfig) -> None:

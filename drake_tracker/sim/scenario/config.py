@@ -7,10 +7,18 @@ Checks live in ``drake_tracker.sim.scenario.checks``; the named presets in
 ``drake_tracker.sim.scenario.presets``.
 """
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from drake_tracker.robot.model import ROBOT_PRESETS, RobotConfig, robot_preset
+from drake_tracker.robot.model import (
+    DEFAULT_CAMERA_NAME,
+    ROBOT_PRESETS,
+    CameraMount,
+    FrameOffset,
+    RobotConfig,
+    robot_preset,
+)
 from drake_tracker.sim.scenario.validation import require
 
 MODES = ("kinematic", "dynamic")
@@ -166,6 +174,24 @@ class CameraConfig:
 
 
 @dataclass
+class MountedCameraConfig(CameraConfig):
+    """One of several depth cameras (``Scenario.cameras``): a ``CameraConfig`` (rate,
+    delay, clock, noise, true offset from its nominal pose) with a name and a mount."""
+
+    #: Its name: its virtual joints are ``<name>_offset_x`` ... (the first camera's
+    #: offset and hand pose are the run's truth and output).
+    name: str = DEFAULT_CAMERA_NAME
+    #: Its nominal pose: ``mount.parent`` empty: the robot's ``camera_frame``; else this
+    #: offset from a frame of the robot model (``added_frames`` as ``<name>_nominal``).
+    mount: FrameOffset = field(default_factory=lambda: FrameOffset(parent=""))
+
+    def sensor(self) -> CameraConfig:
+        """The camera's ``CameraConfig`` fields alone."""
+        return CameraConfig(**{f.name: getattr(self, f.name)
+                               for f in dataclasses.fields(CameraConfig)})
+
+
+@dataclass
 class OccluderConfig:
     """The legacy single occluder: a box that moves between the camera and the hand.
 
@@ -289,6 +315,10 @@ class Scenario:
     trajectory: TrajectoryConfig = field(default_factory=TrajectoryConfig)
     encoders: EncoderConfig = field(default_factory=EncoderConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
+    #: Several depth cameras (the first is the camera of the truth and the output); empty:
+    #: the one ``camera`` at the robot's ``camera_frame``. When given, ``camera`` mirrors
+    #: the first (``load.mirror_first_camera``).
+    cameras: list[MountedCameraConfig] = field(default_factory=list)
     #: The legacy single occluder (see OccluderConfig).
     occluder: OccluderConfig = field(default_factory=OccluderConfig)
     #: Any number of occluders.
@@ -297,12 +327,33 @@ class Scenario:
     model_mismatch: ModelMismatchConfig = field(default_factory=ModelMismatchConfig)
 
     def resolved_robot_config(self) -> RobotConfig:
-        """``robot_config`` when given, else the robot preset named ``robot``."""
+        """``robot_config`` when given, else the robot preset named ``robot``; with
+        ``cameras``, with their mounts (``RobotConfig.cameras``) added."""
         if self.robot_config is not None:
-            return self.robot_config
-        require(self.robot in ROBOT_PRESETS, "Scenario.robot", self.robot,
-                f"unknown robot preset; known: {sorted(ROBOT_PRESETS)} (or give robot_config)")
-        return robot_preset(self.robot)
+            config = self.robot_config
+        else:
+            require(self.robot in ROBOT_PRESETS, "Scenario.robot", self.robot,
+                    f"unknown robot preset; known: {sorted(ROBOT_PRESETS)} (or give "
+                    f"robot_config)")
+            config = robot_preset(self.robot)
+        if not self.cameras:
+            return config
+        config = dataclasses.replace(config, added_frames=dict(config.added_frames))
+        mounts = []
+        for camera in self.cameras:
+            frame = config.camera_frame
+            if camera.mount.parent:
+                frame = f"{camera.name}_nominal"
+                config.added_frames[frame] = camera.mount
+            mounts.append(CameraMount(camera.name, frame))
+        config.cameras = mounts
+        return config
+
+    def resolved_cameras(self) -> list[MountedCameraConfig]:
+        """``cameras``, or the one ``camera`` (named ``camera``, at ``camera_frame``)."""
+        if self.cameras:
+            return list(self.cameras)
+        return [MountedCameraConfig(**dataclasses.asdict(self.camera))]
 
 
 #: Ramp time of the legacy occluder's moves in and out of view (s).

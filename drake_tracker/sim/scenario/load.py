@@ -52,9 +52,15 @@ __all__ = [
     "ROBOT_PROFILES", "SEQUENCES",
     "TRAJECTORY_KINDS", "BiasProfile", "CameraConfig", "EncoderConfig",
     "ModelMismatchConfig", "OccluderConfig", "OccluderSpec", "RobotProfile", "Scenario",
-    "TrajectoryConfig", "list_presets", "load_scenario", "occlusion_windows",
+    "TrajectoryConfig", "list_presets", "load_scenario", "mirror_first_camera", "occlusion_windows",
     "preset_scenario", "robot_profile", "scenario_occluders", "validate_scenario",
 ]
+
+
+def mirror_first_camera(scenario: Scenario) -> None:
+    """With ``cameras``, sets ``camera`` (what the one-camera code reads) to the first."""
+    if scenario.cameras:
+        scenario.camera = scenario.cameras[0].sensor()
 
 
 def load_scenario(name_or_path: str | Path, validate: bool = True) -> Scenario:
@@ -86,6 +92,7 @@ def load_scenario(name_or_path: str | Path, validate: bool = True) -> Scenario:
             raise ValueError(f"{path}: {mismatched_field(raw, base) or err}") from err
         if scenario.name == "custom" and not raw.get("name"):
             scenario.name = path.stem
+        mirror_first_camera(scenario)
         if validate:
             try:
                 validate_scenario(scenario)

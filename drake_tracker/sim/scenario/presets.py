@@ -18,6 +18,8 @@ Apollo:
 * ``occlusion-heavy``: ``s-full-arm`` with a large box fixed in the world between the
   camera and the upper arm from 25 % to 75 % of the run (most of the arm hidden for
   15 s, then revealed); ``occlusion-lasting``: the same box from 25 % to the end;
+  ``occlusion-lasting-2cam``, ``in-out-in-2cam``: those with a second camera on a post
+  on the other side of the arm (``second_camera``);
 * ``s-full-arm-mismatch``: ``s-full-arm`` where the world's robot is not the tracker's
   model (``MISMATCH``: joint origins 3 mm / 0.3 deg off, a cable along the arm, a hand
   15 % larger). The suffix ``-mismatch`` applies to any sequence.
@@ -25,8 +27,16 @@ Apollo:
 
 import copy
 import dataclasses
+import math
 
-from drake_tracker.sim.scenario.config import ModelMismatchConfig, OccluderSpec, Scenario
+from drake_tracker.robot.model import FrameOffset
+from drake_tracker.sim.scenario.config import (
+    CameraConfig,
+    ModelMismatchConfig,
+    MountedCameraConfig,
+    OccluderSpec,
+    Scenario,
+)
 from drake_tracker.sim.scenario.profiles import ROBOT_PROFILES
 
 #: Suffix of a sequence whose world robot differs from the tracker's model.
@@ -37,8 +47,14 @@ MISMATCH = ModelMismatchConfig(joint_origin_mm=3.0, joint_origin_deg=0.3, cable=
 #: The paper's twelve sequences (the evaluation's full protocol).
 SEQUENCES = ("s-lower-arm", "s-upper-arm", "s-full-arm", "s-head", "s-head-arm",
              "arm", "arm++", "both", "both++", "in-out-in", "occlusion", "static")
-#: Sequences beyond the paper's: heavy occlusion and a world that is not the model.
-EXTRA_SEQUENCES = ("occlusion-heavy", "occlusion-lasting", "s-full-arm" + MISMATCH_SUFFIX)
+#: A sequence with this suffix has a second camera (``second_camera``).
+TWO_CAMERA_SUFFIX = "-2cam"
+#: The sequences that come with a second camera.
+TWO_CAMERA_SEQUENCES = ("occlusion-lasting", "in-out-in")
+#: Sequences beyond the paper's: heavy occlusion, a world that is not the model, and
+#: two cameras.
+EXTRA_SEQUENCES = ("occlusion-heavy", "occlusion-lasting", "s-full-arm" + MISMATCH_SUFFIX,
+                   *(q + TWO_CAMERA_SUFFIX for q in TWO_CAMERA_SEQUENCES))
 #: Every listed sequence (any of BASE_SEQUENCES + MISMATCH_SUFFIX is accepted too).
 ALL_SEQUENCES = SEQUENCES + EXTRA_SEQUENCES
 BASE_SEQUENCES = SEQUENCES + ("occlusion-heavy", "occlusion-lasting")
@@ -59,6 +75,21 @@ def heavy_occluder(duration_s: float, lasting: bool) -> OccluderSpec:
                         enter_s=enter * duration_s,
                         leave_s=float("inf") if lasting else leave * duration_s,
                         rgba=[0.3, 0.3, 0.8, 1.0])
+
+
+def second_camera(first: CameraConfig) -> MountedCameraConfig:
+    """A camera on a post on the other side of Apollo's arm: 1.2 m ahead, 1.45 m to its
+    right and 1.45 m up, looking at (0.45, -0.5, 0.9) m, where it sees the arm in front
+    of the head camera's occluder and when the arm swings out of the head camera's view;
+    the head camera's sensor, with a mounting error of its own."""
+    camera = MountedCameraConfig(**dataclasses.asdict(first))
+    camera.name = "post_camera"
+    camera.mount = FrameOffset(parent="torso", xyz_m=[1.2, -1.45, 1.45],
+                               rpy_deg=[-114.44, 0.0, 38.29])
+    camera.offset = [-0.015, 0.02, -0.01, math.radians(-1.5), math.radians(1.0),
+                     math.radians(2.0)]
+    camera.offset_gain_per_rad = {}
+    return camera
 
 
 def _sequence_scenario(s: Scenario, sequence: str) -> None:
@@ -100,9 +131,12 @@ def _preset(sequence: str, bias: str) -> Scenario:
     p = ROBOT_PROFILES["apollo.sdf"]
     s = Scenario(name=f"{sequence}/{bias}", robot="apollo", duration_s=30.0)
     s.camera.offset_gain_per_rad = copy.deepcopy(p.offset_gain_per_rad)
-    base = sequence.removesuffix(MISMATCH_SUFFIX)
+    base = sequence.removesuffix(MISMATCH_SUFFIX).removesuffix(TWO_CAMERA_SUFFIX)
     _sequence_scenario(s, base)
-    if base != sequence:
+    if sequence.endswith(TWO_CAMERA_SUFFIX):
+        head = MountedCameraConfig(**dataclasses.asdict(s.camera))
+        s.cameras = [head, second_camera(s.camera)]
+    if sequence.endswith(MISMATCH_SUFFIX):
         s.model_mismatch = dataclasses.replace(MISMATCH)
     e = s.encoders
     if bias in RANDOM_WALK_RATES:
@@ -122,7 +156,8 @@ def list_presets() -> list[str]:
 def preset_scenario(name: str) -> Scenario:
     """A fresh copy of a named preset; unknown names raise ValueError listing the known."""
     seq, _, bias = name.partition("/")
-    known_sequence = seq.removesuffix(MISMATCH_SUFFIX) in BASE_SEQUENCES
+    known_sequence = seq.removesuffix(MISMATCH_SUFFIX) in BASE_SEQUENCES or (
+        seq.removesuffix(TWO_CAMERA_SUFFIX) in TWO_CAMERA_SEQUENCES)
     if not known_sequence or bias not in BIAS_VARIANTS:
         raise ValueError(f"unknown scenario preset '{name}'; known presets: {list_presets()} "
                          f"(and any SEQUENCE{MISMATCH_SUFFIX}/BIAS)")
