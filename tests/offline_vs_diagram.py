@@ -132,10 +132,10 @@ def feed_cameras(tracker: Tracker, run, times):
     return estimates, applied
 
 
-def simulate_cameras(model, run, p, h, times):
+def simulate_cameras(model, run, p, h, times, system=False):
     """The Diagram with a depth port per camera of ``run`` (``AddTracker(cameras=...)``):
     the estimated positions and each camera's offset port at each of ``times``, and the
-    image-update system's state at the end."""
+    image-update system's state at the end (and, with ``system``, the system)."""
     from drake_tracker.systems.add_tracker import TrackerCamera
 
     builder = DiagramBuilder()
@@ -158,4 +158,6 @@ def simulate_cameras(model, run, p, h, times):
         offsets.append({name: port.Eval(bank_context).copy()
                         for name, port in tracker.camera_offsets.items()})
     cpf = tracker.image_update.state(tracker.image_update.GetMyContextFromRoot(context))
+    if system:
+        return positions, offsets, cpf, tracker.image_update
     return positions, offsets, cpf

@@ -100,7 +100,9 @@ class CpfImageUpdateSystem(LeafSystem):
         self._several = len(prefixes) > 1
         #: Updates on the worker done at their deadline or late (a diagnostic).
         self.deadline_waits = DeadlineWaits()
-        self._warnings = RateLimitedWarning(log)
+        #: The images skipped with a warning, counted by kind (a diagnostic over all its
+        #: Contexts, as ``deadline_waits``).
+        self.warnings = RateLimitedWarning(log)
         self._state = self.DeclareAbstractState(AbstractValue.Make(CpfState(
             cameras={name: CameraImageState(name) for name in prefixes})))
         self._frame_ports = {name: self.DeclareAbstractInputPort(
@@ -203,7 +205,7 @@ class CpfImageUpdateSystem(LeafSystem):
                 s.cameras[name] = replace(cam, deferred_frame=key)
                 return
             # still: the prior does not come from a buffer that takes them in
-            self._warnings.warn("prior without the latest update", (
+            self.warnings.warn("prior without the latest update", (
                 f"image {frame.sequence}'s prior holds image updates up to "
                 f"{prior.observation_id}, not {s.message.id}: is image_observation "
                 f"connected to the buffer that sends image_prior? Used as it is"))
@@ -214,7 +216,7 @@ class CpfImageUpdateSystem(LeafSystem):
         elif cam.last_sequence >= 0 and frame.sequence - cam.last_sequence > 1:
             missed = frame.sequence - cam.last_sequence - 1
             s.images_skipped += missed
-            self._warnings.warn("frames never seen", (
+            self.warnings.warn("frames never seen", (
                 f"{missed} frame(s) before image {frame.sequence}{self._of(name)} were "
                 f"never on the depth port when it was checked (every "
                 f"{self._period_s * 1e3:g} ms): dropped by the camera, or replaced by a "
@@ -294,6 +296,6 @@ class CpfImageUpdateSystem(LeafSystem):
 
     def _skip(self, name: str, frame: DepthFrame, problem: str, kind: str = "") -> bool:
         where = f"(camera '{name}') " if self._several else ""
-        self._warnings.warn(kind or problem_kind(problem),
+        self.warnings.warn(kind or problem_kind(problem),
                             f"image {frame.sequence} skipped: {where}{problem}")
         return False
