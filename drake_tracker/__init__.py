@@ -38,6 +38,7 @@ from drake_tracker.systems import (
     DepthImageToFrame,
     ImageStamper,
     JointKalmanBankSystem,
+    TrackerCamera,
     TrackerSystems,
 )
 from drake_tracker.tracker import Tracker
@@ -49,6 +50,7 @@ __all__ = ["__version__", "AddImageStamper", "AddTracker", "CameraIntrinsics",
            "CpfImageUpdateSystem", "DelayBufferSystem", "DepthFrame",
            "DepthFrameToPointCloud", "DepthImageToFrame", "FrameOffset", "ImageStamper",
            "JointKalmanBankSystem", "ResolvedParams", "RobotConfig", "Tracker",
-           "TrackerModel", "TrackerParams", "TrackerSystems", "build_tracker_model",
+           "TrackerCamera", "TrackerModel", "TrackerParams", "TrackerSystems",
+           "build_tracker_model",
            "default_home_positions", "load_robot_config", "load_tracker_params",
            "resolve_tracker_params"]

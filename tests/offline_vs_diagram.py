@@ -89,13 +89,75 @@ def simulate(model, run, p, stamps=None, sequences=None):
     return estimates, cpf.images_applied + (cpf.in_flight is not None)
 
 
-def assert_same_when_settled(run, diagram, offline, first=0, latency_s=0.0):
+def assert_same_when_settled(run, diagram, offline, first=0, latency_s=0.0, h=H,
+                             arrivals=None):
     """The Diagram applies an image at the first CPF tick after it arrives (<= h later)
-    plus ``latency_s``, the offline tracker at once: compare where no image arrived in
-    that time and the last 2 ticks (samples from the ``first`` reading on)."""
-    arrivals = run.image_arrival_times_s
-    settled = np.array([not np.any((arrivals > t - latency_s - 2.5 * H) & (arrivals <= t))
-                        for t in run.reading_times_s[first:] + 0.6 * H])
+    plus ``latency_s``, the offline tracker at once: compare where no image (of
+    ``arrivals``: default, the run's first camera's) arrived in that time and the last 2
+    ticks (samples from the ``first`` reading on)."""
+    arrivals = run.image_arrival_times_s if arrivals is None else arrivals
+    settled = np.array([not np.any((arrivals > t - latency_s - 2.5 * h) & (arrivals <= t))
+                        for t in run.reading_times_s[first:] + 0.6 * h])
     assert settled.sum() > (0.5 if latency_s == 0 else 0.25) * len(settled)
     difference = np.abs(np.array(diagram[first:])[settled] - np.array(offline[first:])[settled])
     assert np.max(difference) <= 1e-9, np.max(difference)
+
+
+def feed_cameras(tracker: Tracker, run, times):
+    """Feeds a run of several cameras as ``feed`` does (arrival order; a reading before
+    an image at the same time, the cameras in the run's order at a tie), each image
+    named by its camera; returns the estimate after each of ``times`` and the number of
+    images each camera had applied."""
+    from drake_tracker.io.stream import ImageEvent
+    from drake_tracker.io.track_files import run_events
+
+    estimates, applied, s = [], dict.fromkeys(run.camera_names, 0), 0
+
+    def sample_until(limit):
+        nonlocal s
+        while s < len(times) and times[s] < limit:
+            estimates.append(tracker.estimate() if tracker.started else None)
+            s += 1
+
+    for event in run_events(run):
+        if isinstance(event, ImageEvent):
+            sample_until(event.arrival_s)
+            applied[event.camera] += tracker.add_image(DepthFrame(
+                event.capture_s, event.arrival_s, event.depth, event.sequence),
+                camera=event.camera)
+        else:
+            sample_until(event.time_s)
+            tracker.add_reading(event.time_s, event.positions)
+    sample_until(np.inf)
+    return estimates, applied
+
+
+def simulate_cameras(model, run, p, h, times, system=False):
+    """The Diagram with a depth port per camera of ``run`` (``AddTracker(cameras=...)``):
+    the estimated positions and each camera's offset port at each of ``times``, and the
+    image-update system's state at the end (and, with ``system``, the system)."""
+    from drake_tracker.systems.add_tracker import TrackerCamera
+
+    builder = DiagramBuilder()
+    source = builder.AddSystem(RecordedRunSource(run))
+    intrinsics = {run.camera_name: run.camera_intrinsics} | {
+        c.name: c.intrinsics for c in run.other_cameras}
+    tracker = AddTracker(
+        builder, model=model, params=p, encoder_period_s=h,
+        measured_position=source.GetOutputPort("measured_position"),
+        measurement_time=source.GetOutputPort("measurement_time"),
+        cameras=[TrackerCamera(name, camera, source.get_depth_frame_output_port(name))
+                 for name, camera in intrinsics.items()])
+    simulator = Simulator(builder.Build())
+    context = simulator.get_mutable_context()
+    bank_context = tracker.kalman_bank.GetMyContextFromRoot(context)
+    positions, offsets = [], []
+    for t in times:
+        simulator.AdvanceTo(t)
+        positions.append(tracker.estimated_position.Eval(bank_context).copy())
+        offsets.append({name: port.Eval(bank_context).copy()
+                        for name, port in tracker.camera_offsets.items()})
+    cpf = tracker.image_update.state(tracker.image_update.GetMyContextFromRoot(context))
+    if system:
+        return positions, offsets, cpf, tracker.image_update
+    return positions, offsets, cpf

@@ -42,7 +42,8 @@ Keys of ``bench.json``:
   how many updates were not done at their deadline (``CpfImageUpdateSystem.
   deadline_waits``) with the Simulator's wait per simulated second;
 * ``reading_path``: what each joint reading costs the Simulator's thread in a Diagram,
-  on the same recorded sensors (:mod:`drake_tracker.bench.readings`).
+  on the same recorded sensors (:mod:`drake_tracker.bench.readings`);
+* ``cameras``: an image update's cost, one camera at 30 Hz vs two at 15 Hz (``bench/cameras.py``).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.bench.cameras import bench_camera_count, format_camera_count
 from drake_tracker.bench.readings import (
     bench_recorded_reading_path,
     format_reading_path,
@@ -238,6 +240,7 @@ def run_benchmarks(quick: bool = False) -> dict:
     recording = record_demo_sensors(params, 3.0 if quick else 6.0)
     alone = bench_tracker_alone(params, recording[1].duration_s, recording)
     readings = bench_recorded_reading_path(params, recording, quick)
+    cameras = bench_camera_count(params, 2.0 if quick else 4.0)
     bench, cad = results["apollo"], results["apollo_cad"]
     size = camera.subsampled(bench_stride(camera, params))
     return {
@@ -261,6 +264,7 @@ def run_benchmarks(quick: bool = False) -> dict:
         "demo": demo,
         "tracker_alone": alone,
         "reading_path": readings,
+        "cameras": cameras,
     }
 
 
@@ -342,7 +346,7 @@ def format_bench(result: dict) -> str:
     ]
     lines.append(format_demo(result["demo"]))
     lines.append(format_tracker_alone(result["tracker_alone"]))
-    lines.append(format_reading_path(result["reading_path"]))
+    lines += [format_reading_path(result["reading_path"]), format_camera_count(result["cameras"])]
     return "\n".join(lines)
 
 
@@ -371,8 +375,8 @@ def format_tracker_alone(alone: dict) -> str:
 
 def run_bench(args: argparse.Namespace) -> int:
     """``drake-tracker bench``: runs :func:`run_benchmarks` (fewer repetitions with
-    ``--quick``; with ``--only readings`` the reading path alone, ``bench.json`` then
-    holding ``reading_path`` only), prints the figures and writes them to
+    ``--quick``; with ``--only readings`` or ``cameras`` that figure alone, ``bench.json``
+    then holding ``reading_path`` or ``cameras`` only), prints the figures and writes them to
     ``OUT/bench.json``; returns 0."""
     quick = getattr(args, "quick", False)
     if getattr(args, "only", None) == "readings":
@@ -380,6 +384,9 @@ def run_bench(args: argparse.Namespace) -> int:
         result = {"reading_path": bench_recorded_reading_path(
             params, record_demo_sensors(params, 3.0 if quick else 6.0), quick)}
         print(format_reading_path(result["reading_path"]))
+    elif getattr(args, "only", None) == "cameras":
+        result = {"cameras": bench_camera_count(TrackerParams(), 2.0 if quick else 4.0)}
+        print(format_camera_count(result["cameras"]))
     else:
         result = run_benchmarks(quick=quick)
         print(format_bench(result))

@@ -27,6 +27,7 @@ from drake_tracker.cli.lcm_args import (
 )
 
 if TYPE_CHECKING:
+    from drake_tracker.io.bag_source import BagTopics
     from drake_tracker.robot.model import TrackerModel
 
 
@@ -117,10 +118,16 @@ def add_track(sub: argparse._SubParsersAction) -> None:
                         "shipped preset: apollo, arm6)")
     p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic "
                    "(default: the only one)")
-    p.add_argument("--depth-topic", default=None, help="with --bag: the depth Image topic "
-                   "(default: the only one)")
-    p.add_argument("--camera-info-topic", default=None, help="with --bag: the CameraInfo "
-                   "topic (default: the only one)")
+    p.add_argument("--depth-topic", default=None, action="append",
+                   metavar="[NAME=]TOPIC",
+                   help="with --bag: the depth Image topic (default: the only one); "
+                        "repeated as NAME=TOPIC, several depth cameras, each the model's "
+                        "camera NAME (RobotConfig.cameras)")
+    p.add_argument("--camera-info-topic", default=None, action="append",
+                   metavar="[NAME=]TOPIC",
+                   help="with --bag: the CameraInfo topic (default: the only one); as "
+                        "NAME=TOPIC, camera NAME's (default: the only one beside its depth "
+                        "topic)")
     add_lcm_track_arguments(p)
     p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
     p.add_argument("--out", default=None, help="folder for estimates.csv, estimates.mcap "
@@ -183,13 +190,14 @@ def robot_model(path: str | None, flag: str) -> TrackerModel:
 def _track_bag(args, params) -> int:
     model = robot_model(args.robot, "--bag")
     try:
-        from drake_tracker.io.bag_source import BagSource, BagTopics
+        from drake_tracker.io.bag_source import BagSource, check_camera_topics
     except ImportError as err:
         raise UsageError(str(err)) from None
     if args.params:
         check_params_for_model(params, model, f"parameter file '{args.params}'")
-    topics = BagTopics(args.joint_topic, args.depth_topic, args.camera_info_topic)
     try:
+        topics = bag_topics(args.joint_topic, args.depth_topic, args.camera_info_topic)
+        check_camera_topics(topics.cameras, model.camera_names)
         source = BagSource(args.bag, model.robot_joint_names, topics)
     except ValueError as err:
         raise UsageError(str(err)) from None
@@ -203,3 +211,31 @@ def _track_bag(args, params) -> int:
     if args.out:
         print(f"wrote {args.out}/: " + ", ".join(report["files"] + ["report.json"]))
     return 0
+
+
+def bag_topics(joints: str | None, depth: list[str] | None, info: list[str] | None
+               ) -> BagTopics:
+    """The ``BagTopics`` of ``--joint-topic``, ``--depth-topic`` and
+    ``--camera-info-topic``: one camera (``TOPIC``, each flag at most once) or several
+    (``NAME=TOPIC``, a camera-info topic for a named camera only). ValueError naming
+    what is wrong."""
+    from drake_tracker.io.bag_source import BagTopics, CameraTopics
+
+    depth, info = depth or [], info or []
+    named = [v for v in depth + info if "=" in v]
+    if not named:
+        if len(depth) > 1 or len(info) > 1:
+            raise ValueError("several --depth-topic or --camera-info-topic: name each "
+                             "camera, --depth-topic NAME=TOPIC (RobotConfig.cameras)")
+        return BagTopics(joints, depth[0] if depth else None, info[0] if info else None)
+    if len(named) != len(depth) + len(info):
+        raise ValueError("--depth-topic and --camera-info-topic are either all TOPIC (one "
+                         "camera) or all NAME=TOPIC (several)")
+    pairs = [v.split("=", 1) for v in depth]
+    infos = dict(v.split("=", 1) for v in info)
+    unknown = sorted(set(infos) - {name for name, _ in pairs})
+    if unknown:
+        raise ValueError(f"--camera-info-topic {unknown[0]}=...: no --depth-topic "
+                         f"{unknown[0]}=TOPIC")
+    return BagTopics(joints, cameras=tuple(CameraTopics(name, topic, infos.get(name))
+                                           for name, topic in pairs))

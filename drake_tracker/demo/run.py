@@ -101,38 +101,27 @@ def plot_errors(run: RecordedRun, estimates: dict[str, np.ndarray], path: Path,
 
 
 def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
-    """An ``add_systems`` hook: the tracker on the world's ports, and Meshcat views of the
-    true world, the encoders-only robot and the estimate (each moved so that its camera is
-    the real camera), the camera's frustum at its true and estimated poses, and the
-    camera's points."""
-    from pydrake.geometry import (
-        MeshcatPointCloudVisualizer,
-        MeshcatVisualizer,
-        MeshcatVisualizerParams,
-        Role,
-    )
+    """An ``add_systems`` hook: the tracker on the world's ports (every camera of the
+    scenario), and Meshcat views of the true world, the encoders-only robot and the
+    estimate (each moved so that its camera is the real first camera), each camera's
+    frustum at its true and estimated poses, and each camera's points."""
+    from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
     from pydrake.systems.primitives import ConstantVectorSource, Multiplexer
 
     from drake_tracker.demo.meshcat_views import (
         ENCODERS_RGBA,
         ESTIMATE_RGBA,
-        POINTS_RGBA,
-        TRUE_CAMERA_RGBA,
         AddGhostRobot,
-        CameraFrustumVisualizer,
-        FramePoseInWorld,
         frame_the_robot,
     )
-    from drake_tracker.sim.depth_camera import camera_intrinsics
-    from drake_tracker.systems.add_tracker import AddTracker
-    from drake_tracker.systems.point_cloud import DepthFrameToPointCloud
+    from drake_tracker.demo.world_tracker import (
+        AddCameraViews,
+        AddWorldTracker,
+        first_camera_positions,
+    )
 
     def hook(builder, world):
-        tracker = AddTracker(builder, model=world.model, camera=world.intrinsics, params=params,
-                             measured_position=world.port("measured_position"),
-                             measurement_time=world.port("measurement_time"),
-                             depth=world.port("depth_frame"),
-                             encoder_period_s=world.encoder_period_s)
+        tracker = AddWorldTracker(builder, world, params)
         period = 1.0 / 30.0
         MeshcatVisualizer.AddToBuilder(
             builder, world.scene_graph, meshcat,
@@ -144,33 +133,15 @@ def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
                                        ConstantVectorSource(np.zeros(6)))
         builder.Connect(world.port("measured_position"), mux.get_input_port(0))
         builder.Connect(zeros.get_output_port(), mux.get_input_port(1))
-        true_camera = builder.AddNamedSystem(
-            "true_camera_pose", FramePoseInWorld(world.plant, world.camera_frame))
-        builder.Connect(world.port("plant_positions"), true_camera.get_input_port())
+        true_pose = next(iter(AddCameraViews(builder, world, meshcat, tracker,
+                                             period).values()))
         AddGhostRobot(builder, world.robot_config, meshcat, mux.get_output_port(),
-                      "encoders_only", ENCODERS_RGBA, camera_pose=true_camera.get_output_port(),
+                      "encoders_only", ENCODERS_RGBA, camera_pose=true_pose,
                       publish_period_s=period)
         AddGhostRobot(builder, world.robot_config, meshcat,
-                      tracker.estimated_position, "estimate", ESTIMATE_RGBA,
-                      camera_pose=true_camera.get_output_port(), publish_period_s=period)
-        full_camera = camera_intrinsics(world.scenario.camera)
-        for name, pose, rgba in (("true_camera", true_camera.get_output_port(),
-                                  TRUE_CAMERA_RGBA),
-                                 ("estimated_camera", tracker.X_WC, ESTIMATE_RGBA)):
-            frustum = builder.AddNamedSystem(
-                f"{name}_frustum",
-                CameraFrustumVisualizer(meshcat, name, full_camera, rgba,
-                                        publish_period_s=period))
-            builder.Connect(pose, frustum.get_input_port())
-        cloud = builder.AddNamedSystem("point_cloud", DepthFrameToPointCloud(world.intrinsics))
-        builder.Connect(world.port("depth_frame"), cloud.get_input_port())
-        points = builder.AddNamedSystem(
-            "point_cloud_visualizer",
-            MeshcatPointCloudVisualizer(meshcat, "camera_points", publish_period=period))
-        points.set_default_rgba(POINTS_RGBA)
-        points.set_point_size(0.006)
-        builder.Connect(cloud.get_output_port(), points.cloud_input_port())
-        builder.Connect(true_camera.get_output_port(), points.pose_input_port())
+                      first_camera_positions(builder, world.model, tracker.estimated_position),
+                      "estimate", ESTIMATE_RGBA,
+                      camera_pose=true_pose, publish_period_s=period)
         frame_the_robot(meshcat, world.plant, world.end_effector_frame.model_instance(),
                         world.reference.positions(0.0))
         meshcat.StartRecording(frames_per_second=30.0)
@@ -181,19 +152,19 @@ def demo_hook(meshcat: Meshcat, params: TrackerParams) -> Callable:
 
 
 def render_what_the_tracker_reads(scenario: Scenario, params: TrackerParams) -> Scenario:
-    """``scenario`` with the camera rendering only the pixels the tracker reads
-    (``camera.render_stride`` = the tracker's subsampling stride) unless the scenario
-    sets a ``render_stride`` other than 1: the tracker sees the same pixels either way
+    """``scenario`` with each camera rendering only the pixels the tracker reads
+    (``render_stride`` = the tracker's subsampling stride) unless the scenario sets a
+    ``render_stride`` other than 1 for it: the tracker sees the same pixels either way
     (``sim.depth_camera``), at a fraction of the rendering cost."""
     import copy
 
     from drake_tracker.core.sensors.camera import stride_for_width
 
-    if scenario.camera.render_stride != 1:
-        return scenario
     fast = copy.deepcopy(scenario)
-    fast.camera.render_stride = stride_for_width(scenario.camera.width,
-                                                 params.image.image_width_px)
+    for camera in [fast.camera, *fast.cameras]:  # with ``cameras:``, each of them
+        if camera.render_stride == 1:
+            camera.render_stride = stride_for_width(camera.width,
+                                                    params.image.image_width_px)
     return fast
 
 

@@ -15,6 +15,9 @@ MCAP storage) or a single ``.mcap`` file, read with ``rosbags`` (the ``ros`` ext
   nanoseconds until then (Unix stamps of 1.7e9 s would lose 0.2 µs in a float), then
   the nearest float to their count over 1e9.
 * Messages stream in the bag's order, one at a time: memory stays flat on long bags.
+* Several depth cameras (``BagTopics.cameras``: each a camera of the model by name, its
+  depth topic and its CameraInfo topic): each camera's images are named by it
+  (``ImageEvent.camera``), numbered on their own, with the camera's own intrinsics.
 """
 
 from __future__ import annotations
@@ -47,12 +50,67 @@ TRUTH_POSE_TOPIC = TRUTH_PREFIX + "hand_pose"
 
 
 @dataclass(frozen=True)
+class CameraTopics:
+    """One depth camera of a bag: the model's camera ``name``, its depth Image topic and
+    its CameraInfo topic (None: the only CameraInfo topic in the depth topic's
+    namespace, e.g. ``/post/depth/camera_info`` beside ``/post/depth/image_raw``)."""
+
+    name: str
+    depth: str
+    camera_info: str | None = None
+
+
+@dataclass(frozen=True)
 class BagTopics:
-    """The topics a bag is tracked from (``None``: find it by type)."""
+    """The topics a bag is tracked from (``None``: find it by type); ``cameras``:
+    instead of ``depth`` and ``camera_info``, several depth cameras."""
 
     joints: str | None = None
     depth: str | None = None
     camera_info: str | None = None
+    cameras: tuple[CameraTopics, ...] = ()
+
+
+@dataclass(frozen=True)
+class BagCamera:
+    """A depth camera read from a bag: its topics, intrinsics and frame id."""
+
+    #: The model's camera (None: the bag's one camera, read without a name).
+    name: str | None
+    depth_topic: str
+    camera_info_topic: str
+    intrinsics: CameraIntrinsics
+    frame: str
+
+
+def check_camera_topics(cameras: tuple[CameraTopics, ...],
+                        model_cameras: list[str] | None = None) -> None:
+    """ValueError for a camera the model does not have (with ``model_cameras``, the
+    model's camera names), two cameras of one name, or one depth topic for two
+    cameras."""
+    names = [c.name for c in cameras]
+    for name in names:
+        if model_cameras is not None and name not in model_cameras:
+            raise ValueError(f"unknown camera '{name}': the model's cameras are "
+                             f"{model_cameras} (RobotConfig.cameras)")
+        if names.count(name) > 1:
+            raise ValueError(f"two cameras are named '{name}': give each depth topic once")
+    topics = [c.depth for c in cameras]
+    twice = sorted({t for t in topics if topics.count(t) > 1})
+    if twice:
+        raise ValueError(f"depth topic {twice[0]} is given for two cameras")
+
+
+def info_topic_beside(reader: Any, depth_topic: str, camera: str) -> str:
+    """The only CameraInfo topic in ``depth_topic``'s namespace (an error naming them)."""
+    namespace = depth_topic.rsplit("/", 1)[0] + "/"
+    candidates = sorted({c.topic for c in reader.connections if c.msgtype == CAMERA_INFO
+                         and c.topic.startswith(namespace)})
+    if len(candidates) != 1:
+        raise ValueError(f"camera '{camera}': {len(candidates)} CameraInfo topics beside "
+                         f"{depth_topic} ({candidates or 'none'}): pick one with "
+                         f"--camera-info-topic {camera}=TOPIC")
+    return candidates[0]
 
 
 def open_bag(path: str | Path) -> Any:
@@ -123,26 +181,52 @@ class BagSource:
         self.reader = open_bag(path)
         r = self.reader
         self.joint_topic = pick_topic(r, JOINT_STATE, topics.joints, "--joint-topic")
-        self.depth_topic = pick_topic(r, IMAGE, topics.depth, "--depth-topic")
-        self.camera_info_topic = pick_topic(r, CAMERA_INFO, topics.camera_info,
-                                            "--camera-info-topic")
-        info = self._first(self.camera_info_topic)
-        if info is None:
-            raise ValueError(f"bag {self.path}: no CameraInfo message on "
-                             f"{self.camera_info_topic}")
-        self.intrinsics = intrinsics_from_camera_info(info)
-        self.camera_frame = str(info.header.frame_id) or "camera"
-        first = [self._first(t) for t in (self.joint_topic, self.depth_topic)]
+        if topics.cameras:
+            check_camera_topics(topics.cameras)
+            wanted = [(c.name, pick_topic(r, IMAGE, c.depth, "--depth-topic"),
+                       c.camera_info or info_topic_beside(r, c.depth, c.name))
+                      for c in topics.cameras]
+        else:
+            wanted = [(None, pick_topic(r, IMAGE, topics.depth, "--depth-topic"),
+                       pick_topic(r, CAMERA_INFO, topics.camera_info,
+                                  "--camera-info-topic"))]
+        #: Each depth camera (name None: the bag's one camera of a one-camera call).
+        self.cameras = [self._camera(*w) for w in wanted]
+        first_camera = self.cameras[0]
+        self.depth_topic, self.camera_info_topic = (first_camera.depth_topic,
+                                                    first_camera.camera_info_topic)
+        self.intrinsics, self.camera_frame = first_camera.intrinsics, first_camera.frame
+        first = [self._first(t) for t in [self.joint_topic] + self.depth_topics]
         stamps = [stamp_ns(m) for m in first if m is not None]
         if first[0] is None:
             raise ValueError(f"bag {self.path}: no message on {self.joint_topic}")
         self._columns(first[0])  # a model joint the messages lack is an error here
         #: The time base (integer ns): the first joint or depth message's stamp.
         self.base_ns = min(stamps)
-        self.num_images = sum(c.msgcount for c in r.connections if c.topic == self.depth_topic)
+        self.num_images = sum(c.msgcount for c in r.connections
+                              if c.topic in self.depth_topics)
         truth = [c for c in r.connections
                  if c.topic == TRUTH_POSE_TOPIC and c.msgtype == POSE_STAMPED]
         self._truth = truth
+
+    @property
+    def depth_topics(self) -> list[str]:
+        """Every camera's depth topic."""
+        return [c.depth_topic for c in self.cameras]
+
+    def camera_models(self) -> dict[str, CameraIntrinsics] | CameraIntrinsics:
+        """The cameras' intrinsics by name (``Tracker(cameras=...)``), or the one camera's
+        (``Tracker(model, camera)``) for a bag read without camera names."""
+        if self.cameras[0].name is None:
+            return self.intrinsics
+        return {c.name: c.intrinsics for c in self.cameras}
+
+    def _camera(self, name: str | None, depth_topic: str, info_topic: str) -> BagCamera:
+        info = self._first(info_topic)
+        if info is None:
+            raise ValueError(f"bag {self.path}: no CameraInfo message on {info_topic}")
+        return BagCamera(name, depth_topic, info_topic, intrinsics_from_camera_info(info),
+                         str(info.header.frame_id) or (name or "camera"))
 
     def _first(self, topic: str) -> Any:
         connections = [c for c in self.reader.connections if c.topic == topic]
@@ -162,9 +246,11 @@ class BagSource:
     def events(self) -> Iterator[Event]:
         """The readings and depth images in the bag's order (see the module)."""
         r = self.reader
-        wanted = [c for c in r.connections if c.topic in (self.joint_topic, self.depth_topic)]
+        camera_of = {c.depth_topic: c.name for c in self.cameras}
+        wanted = [c for c in r.connections
+                  if c.topic == self.joint_topic or c.topic in camera_of]
         columns_for: dict[tuple, np.ndarray | str] = {}
-        sequence = 0
+        sequences = dict.fromkeys(camera_of.values(), 0)
         try:
             for connection, log_ns, raw in r.messages(connections=wanted):
                 try:
@@ -203,13 +289,14 @@ class BagSource:
                                              f"depth image at {t:.6f} s skipped: {err}")
                         continue
                     arrival = logged_arrival(t, (int(log_ns) - self.base_ns) / 10**9)
-                    yield ImageEvent(t, depth, sequence, arrival)
-                    sequence += 1
+                    camera = camera_of[connection.topic]
+                    yield ImageEvent(t, depth, sequences[camera], arrival, camera)
+                    sequences[camera] += 1
         except Exception as err:
             if isinstance(err, GeneratorExit):
                 raise
             raise ValueError(f"bag {self.path} is truncated or corrupt after "
-                             f"{sequence} depth images: {err}") from err
+                             f"{sum(sequences.values())} depth images: {err}") from err
 
     def truth_X_CE(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(times, (T, 4, 4) X_CE) of the bag's truth topic (``record --bag`` writes

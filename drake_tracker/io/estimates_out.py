@@ -10,7 +10,9 @@
 * ``angle_<joint>_<unit>``, ``bias_<joint>_<unit>`` for each robot joint (``rad``, or
   ``m`` for a prismatic joint);
 * ``camera_x_m, camera_y_m, camera_z_m, camera_rx_rad, camera_ry_rad, camera_rz_rad``:
-  the estimated camera relative to the nominal one.
+  the estimated camera relative to the nominal one (with several cameras, the first's);
+* with several cameras, each further camera ``NAME``'s offset: ``NAME_x_m`` ...
+  ``NAME_rz_rad``.
 
 ``estimates.mcap`` (with the ``ros`` extra) carries the same estimates as ROS 2 messages
 so Foxglove or RViz can overlay them on the input: ``/tracker/hand_pose``
@@ -72,9 +74,13 @@ class EstimatesCsv:
         prismatic = set(model.prismatic_joint_names)
         names = model.robot_joint_names
         units = ["m" if n in prismatic else "rad" for n in names]
+        #: The further cameras, whose offsets follow the first camera's.
+        self._others = list(model.camera_names[1:])
         self.columns = ["t_s", *POSE_COLUMNS, "health",
                         *(f"{kind}_{n}_{u}" for n, u in zip(names, units)
-                          for kind in ("angle", "bias")), *CAMERA_COLUMNS]
+                          for kind in ("angle", "bias")), *CAMERA_COLUMNS,
+                        *(name + c.removeprefix("camera") for name in self._others
+                          for c in CAMERA_COLUMNS)]
         self._file = self.path.open("w", newline="")
         self._csv = csv.writer(self._file)
         self._csv.writerow(self.columns)
@@ -89,7 +95,9 @@ class EstimatesCsv:
                             *(repr(float(v)) for v in pose_values(estimate.X_CE)),
                             HealthState(estimate.health.state).name.lower(),
                             *(repr(float(v)) for v in joint_values),
-                            *(repr(float(v)) for v in estimate.camera_offset)])
+                            *(repr(float(v)) for v in estimate.camera_offset),
+                            *(repr(float(v)) for name in self._others
+                              for v in estimate.camera_offsets[name])])
         self.rows += 1
 
     def close(self) -> None:

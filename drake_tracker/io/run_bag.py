@@ -7,6 +7,11 @@ the truth: ``/truth/hand_pose`` (``geometry_msgs/msg/PoseStamped``, X_CE in the 
 camera frame) and ``/truth/joint_states`` (the true angles). Header stamps are the run's
 times plus ``base_ns`` (a Unix time: real bags' stamps are); each message is logged at
 its stamp, an image at its arrival.
+
+A run of several cameras (``RecordedRun.other_cameras``) writes each further camera
+``NAME``'s images on ``/NAME/depth/image_raw`` and ``/NAME/depth/camera_info``
+(:func:`camera_topics`; frame ``NAME_depth_optical_frame``); ``track --bag`` takes them
+back with ``--depth-topic NAME=TOPIC``.
 """
 
 from __future__ import annotations
@@ -28,6 +33,20 @@ if TYPE_CHECKING:
 #: 2023-11-14T22:13:20Z: the default time base of a written bag (ns).
 DEFAULT_BASE_NS = 1_700_000_000 * 10**9
 CAMERA_FRAME = "camera_depth_optical_frame"
+#: The first camera's topics (its name aside).
+DEPTH_TOPIC, CAMERA_INFO_TOPIC = "/camera/depth/image_raw", "/camera/depth/camera_info"
+
+
+def camera_topics(run: RecordedRun) -> dict[str, tuple[str, str, str]]:
+    """Each camera's (depth topic, camera-info topic, frame id) in a written bag: the
+    first camera's are ``DEPTH_TOPIC``, ``CAMERA_INFO_TOPIC`` and ``CAMERA_FRAME``
+    whatever its name, a further camera ``NAME``'s ``/NAME/depth/...``."""
+    topics = {run.camera_name: (DEPTH_TOPIC, CAMERA_INFO_TOPIC, CAMERA_FRAME)}
+    for camera in run.other_cameras:
+        topics[camera.name] = (f"/{camera.name}/depth/image_raw",
+                               f"/{camera.name}/depth/camera_info",
+                               f"{camera.name}_depth_optical_frame")
+    return topics
 
 
 def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BASE_NS
@@ -39,11 +58,12 @@ def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BAS
     try:
         topics = {
             "joints": ("/joint_states", "sensor_msgs/msg/JointState"),
-            "depth": ("/camera/depth/image_raw", "sensor_msgs/msg/Image"),
-            "info": ("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo"),
             "truth_pose": (TRUTH_POSE_TOPIC, "geometry_msgs/msg/PoseStamped"),
             "truth_joints": ("/truth/joint_states", "sensor_msgs/msg/JointState"),
         }
+        for name, (depth, info, _) in camera_topics(run).items():
+            topics[("info", name)] = (info, "sensor_msgs/msg/CameraInfo")
+            topics[("depth", name)] = (depth, "sensor_msgs/msg/Image")
         connections = {k: writer.add_connection(topic, kind, typestore=m.store)
                        for k, (topic, kind) in topics.items()}
         count = 0
@@ -58,22 +78,22 @@ def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BAS
 def _messages(run: RecordedRun, m: RosMessages, base_ns: int) -> Iterator[tuple]:
     """(log time ns, topic key, message) in log order, built one at a time."""
     names = list(run.joint_names)
-    cam = run.camera_intrinsics
 
     def readings():
         for t, q in zip(run.reading_times_s, run.readings_rad):
             yield stamp_ns(base_ns, t), 0, "joints", lambda t=t, q=q: m.joint_state(
                 stamp_ns(base_ns, t), names, q)
 
-    def images():
-        order, _ = run.images_in_arrival_order()
-        for i in order:
-            stamp = stamp_ns(base_ns, run.image_capture_times_s[i])
-            arrival = stamp_ns(base_ns, run.image_arrival_times_s[i])
-            yield arrival, 1, "info", lambda s=stamp: m.camera_info(
-                s, CAMERA_FRAME, cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
-            yield arrival, 2, "depth", lambda s=stamp, i=i: m.depth_image(
-                s, CAMERA_FRAME, np.asarray(run.depth_images_m[i], np.float32))
+    def images(name, cam, capture, arrival_s, depth_images, frame):
+        arrivals = np.asarray(arrival_s, float)
+        order = np.argsort(arrivals, kind="stable")
+        for i in order[np.isfinite(arrivals[order])]:
+            stamp = stamp_ns(base_ns, capture[i])
+            arrival = stamp_ns(base_ns, arrivals[i])
+            yield arrival, 1, ("info", name), lambda s=stamp: m.camera_info(
+                s, frame, cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+            yield arrival, 2, ("depth", name), lambda s=stamp, i=i: m.depth_image(
+                s, frame, np.asarray(depth_images[i], np.float32))
 
     def truth():
         for t, X, q in zip(run.truth_times_s, run.truth_X_CE, run.truth_positions_rad):
@@ -82,6 +102,11 @@ def _messages(run: RecordedRun, m: RosMessages, base_ns: int) -> Iterator[tuple]
                 s, CAMERA_FRAME, pose_values(X))
             yield stamp, 4, "truth_joints", lambda s=stamp, q=q: m.joint_state(s, names, q)
 
-    for log_ns, _, key, build in heapq.merge(readings(), images(), truth(),
+    frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
+    cameras = [images(run.camera_name, run.camera_intrinsics, run.image_capture_times_s,
+                      run.image_arrival_times_s, run.depth_images_m, CAMERA_FRAME)]
+    cameras += [images(c.name, c.intrinsics, c.capture_times_s, c.arrival_times_s,
+                       c.depth_images_m, frames[c.name]) for c in run.other_cameras]
+    for log_ns, _, key, build in heapq.merge(readings(), *cameras, truth(),
                                              key=lambda e: (e[0], e[1])):
         yield log_ns, key, build()

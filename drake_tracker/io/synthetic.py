@@ -37,7 +37,8 @@ def synthetic_run(model: TrackerModel, duration_s: float = 1.0, encoder_rate_hz:
     Every robot joint (or those in ``biased_joints``) gets ``bias_rad`` of encoder bias,
     which steps by ``bias_step_rad`` at ``bias_step_time_s``;
     ``camera_offset`` (6) is the true camera pose relative to the nominal one (default:
-    1 cm, 1 deg on each axis).
+    1 cm, 1 deg on each axis); with several cameras in ``model``, the first camera's (its
+    images are the run's), the others' offsets 0.
     """
     rng = np.random.default_rng(seed)
     camera = camera or CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
@@ -50,7 +51,7 @@ def synthetic_run(model: TrackerModel, duration_s: float = 1.0, encoder_rate_hz:
     def truth(t: np.ndarray) -> np.ndarray:
         q = np.tile(home, (len(t), 1))
         q[:, robot] += amplitude_rad * np.sin(2 * np.pi * t[:, None] / period_s + phases)
-        q[:, model.virtual_joint_indices] = offset
+        q[:, model.camera_joint_indices(model.camera_names[0])] = offset  # the others: 0
         return q
 
     reading_times = np.arange(0.0, duration_s, 1.0 / encoder_rate_hz)

@@ -103,15 +103,18 @@ class Truth:
 
 
 def track_to_folder(events: Iterable[Event], model: TrackerModel,
-                    camera: CameraIntrinsics, params: TrackerParams | None,
+                    camera: CameraIntrinsics | dict[str, CameraIntrinsics],
+                    params: TrackerParams | None,
                     out_dir: str | Path | None, base_ns: int = 0,
                     camera_frame: str = "camera", truth: Truth | None = None,
                     total_images: int | None = None, source: dict | None = None,
                     progress: bool = True) -> dict:
     """Tracks ``events`` and writes ``estimates.csv``, ``estimates.mcap`` (when the
     ``ros`` extra is installed) and ``report.json`` into ``out_dir`` (None: nothing is
-    written); returns the report."""
-    tracker = Tracker(model, camera, params)
+    written); returns the report. ``camera``: the one camera's intrinsics, or several
+    cameras' by name (``Tracker(cameras=...)``; the events name their camera)."""
+    tracker = (Tracker(model, params=params, cameras=camera) if isinstance(camera, dict)
+               else Tracker(model, camera, params))
     sinks = []
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
@@ -169,11 +172,14 @@ def track_bag(source: BagSource, model: TrackerModel, params: TrackerParams | No
     truth = source.truth_X_CE()
     try:
         return track_to_folder(
-            source.events(), model, source.intrinsics, params, out_dir, source.base_ns,
+            source.events(), model, source.camera_models(), params, out_dir, source.base_ns,
             source.camera_frame, Truth(*truth) if truth is not None else None,
             source.num_images, {"bag": str(source.path), "joint_topic": source.joint_topic,
                                 "depth_topic": source.depth_topic,
-                                "camera_info_topic": source.camera_info_topic},
+                                "camera_info_topic": source.camera_info_topic,
+                                **({"cameras": {c.name: [c.depth_topic, c.camera_info_topic]
+                                                for c in source.cameras}}
+                                   if len(source.cameras) > 1 else {})},
             progress)
     finally:
         source.close()
@@ -182,10 +188,14 @@ def track_bag(source: BagSource, model: TrackerModel, params: TrackerParams | No
 def track_run(run: RecordedRun, model: TrackerModel, params: TrackerParams | None,
               out_dir: str | Path | None, progress: bool = True) -> dict:
     """Tracks a recorded run into ``out_dir`` (see :func:`track_to_folder`), against its
-    truth."""
-    return track_to_folder(run_events(run), model, run.camera_intrinsics, params, out_dir,
+    truth; a run of several cameras with all of them."""
+    cameras = ({run.camera_name: run.camera_intrinsics} | {
+        c.name: c.intrinsics for c in run.other_cameras}) if run.other_cameras else \
+        run.camera_intrinsics
+    return track_to_folder(run_events(run), model, cameras, params, out_dir,
                            truth=Truth(run.truth_times_s, run.truth_X_CE),
-                           total_images=len(run.image_capture_times_s),
+                           total_images=len(run.image_capture_times_s) + sum(
+                               len(c.capture_times_s) for c in run.other_cameras),
                            source={"run": "recorded run"}, progress=progress)
 
 

@@ -1,6 +1,6 @@
 """Thin Drake LeafSystems around the functional core, and ``AddTracker`` to wire them."""
 
-from drake_tracker.systems.add_tracker import AddTracker, TrackerSystems
+from drake_tracker.systems.add_tracker import AddTracker, TrackerCamera, TrackerSystems
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
 from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
 from drake_tracker.systems.depth_image_adapter import (
@@ -13,4 +13,4 @@ from drake_tracker.systems.point_cloud import DepthFrameToPointCloud
 
 __all__ = ["AddImageStamper", "AddTracker", "CpfImageUpdateSystem", "DelayBufferSystem",
            "DepthFrameToPointCloud", "DepthImageToFrame", "ImageStamper",
-           "JointKalmanBankSystem", "TrackerSystems"]
+           "JointKalmanBankSystem", "TrackerCamera", "TrackerSystems"]

@@ -18,13 +18,18 @@ The depth input is what a Drake user has: an ``RgbdSensor``'s ``depth_image_32f`
 (``RgbdSensorAsync``'s ``image_time``, or an :class:`ImageStamper`'s); a
 :class:`DepthImageToFrame` converts it at ``5h/8``, before the CPF system looks.
 A port of the package's own ``DepthFrame`` is connected as it is.
+
+Several depth cameras (``cameras=[TrackerCamera(...), ...]``, each one of the model's
+``RobotConfig.cameras``) each have their own depth and image-time ports, converter and
+camera model; their images enter the one delay buffer at their own capture times,
+interleaved, each through its own clock and its own image update.
 """
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Union
 
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 
@@ -32,7 +37,7 @@ from drake_tracker.core.sensors.camera import as_intrinsics
 from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.systems.cpf_system import CpfImageUpdateSystem
-from drake_tracker.systems.delay_buffer_system import DelayBufferSystem
+from drake_tracker.systems.delay_buffer_system import DelayBufferSystem, camera_port_names
 from drake_tracker.systems.depth_image_adapter import DepthImageToFrame, depth_port_kind
 from drake_tracker.systems.kalman_bank_system import JointKalmanBankSystem
 
@@ -42,6 +47,25 @@ if TYPE_CHECKING:
 
     from drake_tracker.core.sensors.camera import CameraIntrinsics
     from drake_tracker.robot.model import TrackerModel
+
+#: A depth camera's model: Drake's ``CameraInfo``, ``DepthRenderCamera`` or
+#: ``RenderCameraCore``, or ``CameraIntrinsics``.
+CameraModel = Union["CameraIntrinsics", "CameraInfo", "DepthRenderCamera", "RenderCameraCore"]
+
+
+@dataclass
+class TrackerCamera:
+    """One depth camera of a tracker with several (``AddTracker(cameras=[...])``).
+
+    ``name`` is one of the model's cameras (``RobotConfig.cameras``); ``camera`` its model
+    (full resolution of its images); ``depth`` and ``image_time`` its ports, as
+    ``AddTracker``'s ``depth`` and ``image_time``."""
+
+    name: str
+    camera: CameraModel
+    depth: OutputPort
+    image_time: OutputPort | None = None
+
 
 #: Output ports of the Kalman bank that ``AddTracker`` exports.
 ESTIMATE_PORTS = ("estimated_position", "position_variance", "bias", "bias_variance",
@@ -81,6 +105,13 @@ class TrackerSystems:
     camera_offset: OutputPort
     belief: OutputPort
     health: OutputPort
+    #: Each camera's name -> its offset (the six virtual joints), its estimated frame in
+    #: the model's world (X_WC), its health and its image converter (None for a
+    #: DepthFrame port); with one camera, the model's first camera.
+    camera_offsets: dict[str, OutputPort] = field(default_factory=dict)
+    camera_poses: dict[str, OutputPort] = field(default_factory=dict)
+    camera_health: dict[str, OutputPort] = field(default_factory=dict)
+    depth_adapters: dict[str, DepthImageToFrame | None] = field(default_factory=dict)
 
     def port(self, name: str) -> OutputPort:
         """The output port called ``name`` (``ESTIMATE_PORTS`` or ``health``); the fields
@@ -102,7 +133,8 @@ def AddTracker(builder: DiagramBuilder, *args: Any,
                image_time: OutputPort | None = None,
                encoder_period_s: float | None = None,
                image_check_period_s: float | None = None,
-               name: str = "tracker") -> TrackerSystems:
+               name: str = "tracker",
+               cameras: list[TrackerCamera] | None = None) -> TrackerSystems:
     """Adds the tracker for ``model`` to ``builder`` and connects its inputs; returns the
     systems and the output ports (:class:`TrackerSystems`). Every argument after
     ``builder`` is keyword-only (the positional call of the previous release still works,
@@ -128,6 +160,10 @@ def AddTracker(builder: DiagramBuilder, *args: Any,
         image_check_period_s: how often the tracker looks for a new image (default:
             ``encoder_period_s``); an image waits at most this long.
         name: the prefix of the added systems' names.
+        cameras: instead of ``camera``, ``depth`` and ``image_time``, several depth
+            cameras (:class:`TrackerCamera`), each one of the model's cameras, named once;
+            their ports are the systems' ``<name>_depth_frame``, ... A camera of the model
+            left out has no images (its offset stays at its prior).
     """
     if args:
         if len(args) > len(_POSITIONAL):
@@ -147,9 +183,14 @@ def AddTracker(builder: DiagramBuilder, *args: Any,
         if twice:
             raise TypeError(f"AddTracker got {twice} both by position and by keyword")
         return AddTracker(builder, **{**passed, "name": name, **given})
-    missing = [k for k, v in (("model", model), ("camera", camera),
+    several = cameras is not None
+    if several and any(v is not None for v in (camera, depth, image_time)):
+        raise TypeError("AddTracker: give either camera=, depth= (and image_time=) or "
+                        "cameras=[TrackerCamera(...), ...], not both")
+    missing = [k for k, v in (("model", model), ("camera", camera if not several else 0),
                               ("measured_position", measured_position),
-                              ("measurement_time", measurement_time), ("depth", depth),
+                              ("measurement_time", measurement_time),
+                              ("depth", depth if not several else 0),
                               ("encoder_period_s", encoder_period_s)) if v is None]
     if missing:
         raise TypeError(f"AddTracker: missing keyword argument(s) {missing}")
@@ -157,40 +198,71 @@ def AddTracker(builder: DiagramBuilder, *args: Any,
     if not h > 0:
         raise ValueError(f"AddTracker: encoder_period_s must be > 0, got {encoder_period_s}")
     check = h if image_check_period_s is None else float(image_check_period_s)
+    if not several:
+        cameras = [TrackerCamera(model.camera_names[0], camera, depth, image_time)]
+    names = camera_port_names(model, [c.name for c in cameras] if several else None)
+    given = {c.name: c for c in cameras}
     resolved = resolve_tracker_params(TrackerParams() if params is None else params, model)
-    intrinsics = as_intrinsics(camera)
-    kind = depth_port_kind(depth)
-    adapter = None
-    if kind != "depth_frame":
-        if image_time is None:
-            raise ValueError("AddTracker: a depth image port needs its capture time: pass "
-                             "image_time (RgbdSensorAsync's image_time, or an "
-                             "ImageStamper's)")
-        adapter = builder.AddNamedSystem(
-            f"{name}_depth_image_to_frame",
-            DepthImageToFrame(encoding=kind, period_s=check, offset_s=0.625 * h))
-        builder.Connect(depth, adapter.get_depth_image_input_port())
-        builder.Connect(image_time, adapter.get_image_time_input_port())
-        depth = adapter.get_depth_frame_output_port()
-    elif image_time is not None:
-        raise ValueError("AddTracker: image_time goes with an image port; a DepthFrame "
-                         "carries its own capture time")
+    models = {c: as_intrinsics(given[c].camera) for c in names}
+    frames, adapters = {}, {}
+    for cam, prefix in names.items():
+        frames[cam], adapters[cam] = _depth_frame_port(
+            builder, f"{name}_{prefix}", given[cam].depth, given[cam].image_time, check, h)
     buffer = builder.AddNamedSystem(f"{name}_delay_buffer", DelayBufferSystem(
-        model=model, params=resolved, period_s=h, offset_s=0.25 * h))
+        model=model, params=resolved, period_s=h, offset_s=0.25 * h,
+        cameras=list(names) if several else None))
     bank = builder.AddNamedSystem(f"{name}_kalman_bank", JointKalmanBankSystem(
         model=model, params=resolved, period_s=h, offset_s=0.5 * h))
     cpf = builder.AddNamedSystem(f"{name}_image_update", CpfImageUpdateSystem(
-        model=model, camera=intrinsics, params=resolved, period_s=check,
-        offset_s=0.75 * h))
+        model=model, params=resolved, period_s=check, offset_s=0.75 * h,
+        **({"cameras": models} if several else {"camera": models[model.camera_names[0]]})))
     builder.Connect(measured_position, buffer.get_measured_position_input_port())
     builder.Connect(measurement_time, buffer.get_measurement_time_input_port())
-    builder.Connect(depth, buffer.get_depth_frame_input_port())
-    builder.Connect(depth, cpf.get_depth_frame_input_port())
+    for cam, frame in frames.items():
+        builder.Connect(frame, buffer.get_depth_frame_input_port(cam))
+        builder.Connect(frame, cpf.get_depth_frame_input_port(cam))
+        builder.Connect(buffer.get_image_prior_output_port(cam),
+                        cpf.get_image_prior_input_port(cam))
     builder.Connect(buffer.get_reading_output_port(), bank.get_reading_input_port())
     builder.Connect(buffer.get_correction_output_port(), bank.get_correction_input_port())
-    builder.Connect(buffer.get_image_prior_output_port(), cpf.get_image_prior_input_port())
     builder.Connect(cpf.get_image_observation_output_port(),
                     buffer.get_image_observation_input_port())
     ports = {port: bank.GetOutputPort(port) for port in ESTIMATE_PORTS}
-    return TrackerSystems(bank, buffer, cpf, model, adapter,
-                          health=cpf.get_health_output_port(), **ports)
+    return TrackerSystems(
+        bank, buffer, cpf, model, next(iter(adapters.values())),
+        health=cpf.get_health_output_port(), **ports,
+        camera_offsets=_per_camera(bank, names, "camera_offset", ports["camera_offset"]),
+        camera_poses=_per_camera(bank, names, "X_WC", ports["X_WC"]),
+        camera_health={c: cpf.get_health_output_port(c) for c in names},
+        depth_adapters=adapters)
+
+
+def _depth_frame_port(builder: DiagramBuilder, prefix: str, depth: OutputPort,
+                      image_time: OutputPort | None, check: float, h: float
+                      ) -> tuple[OutputPort, DepthImageToFrame | None]:
+    """A camera's ``DepthFrame`` port: ``depth`` itself, or a converter's of the Drake
+    image port ``depth`` (with its capture time ``image_time``)."""
+    kind = depth_port_kind(depth)
+    if kind == "depth_frame":
+        if image_time is not None:
+            raise ValueError("AddTracker: image_time goes with an image port; a DepthFrame "
+                             "carries its own capture time")
+        return depth, None
+    if image_time is None:
+        raise ValueError("AddTracker: a depth image port needs its capture time: pass "
+                         "image_time (RgbdSensorAsync's image_time, or an "
+                         "ImageStamper's)")
+    adapter = builder.AddNamedSystem(
+        f"{prefix}depth_image_to_frame",
+        DepthImageToFrame(encoding=kind, period_s=check, offset_s=0.625 * h))
+    builder.Connect(depth, adapter.get_depth_image_input_port())
+    builder.Connect(image_time, adapter.get_image_time_input_port())
+    return adapter.get_depth_frame_output_port(), adapter
+
+
+def _per_camera(bank: JointKalmanBankSystem, names: dict[str, str], port: str,
+                only: OutputPort) -> dict[str, OutputPort]:
+    """Each camera's ``<name>_<port>`` of the bank (with one camera in the model, ``only``)."""
+    if bank.HasOutputPort(f"{next(iter(names))}_{port}"):
+        return {c: bank.GetOutputPort(f"{c}_{port}") for c in names}
+    return {c: only for c in names}

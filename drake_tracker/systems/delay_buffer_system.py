@@ -26,6 +26,8 @@ from drake_tracker.systems.messages import (
 from drake_tracker.systems.shared_state import SharedAbstractState
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from drake_tracker.core.resolved_params import ResolvedParams
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
@@ -33,11 +35,26 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
+@dataclass(frozen=True)
+class CameraFrames:
+    """One camera's images at the buffer (step 1): its clock, the last frame it judged
+    and its decision. Frozen: an update that judges a new frame replaces it."""
+
+    clock: StreamClock
+    #: What tells the frames apart (``frame_key``) of the frame judged last.
+    key: tuple = ()
+    decision: StampDecision | None = None
+    #: The frame judged last (the object: the port holds the same one until a new
+    #: frame, and a DepthFrame is never changed in place).
+    frame: DepthFrame | None = None
+
+
 @dataclass
 class DelayBufferState(SharedAbstractState):
     """The system's abstract state. A stored one is never modified: ``_update`` works on
-    a ``copy()`` of it and copies each part it changes (the buffer, a clock) before
-    changing it, so Drake's two copies of the state at every update share it."""
+    a ``copy()`` of it and copies each part it changes (the buffer, a clock, the dict of
+    cameras) before changing it, so Drake's two copies of the state at every update
+    share it."""
 
     buffer: BeliefBuffer | None = None
     last_reading_time_s: float = float("-inf")
@@ -46,19 +63,40 @@ class DelayBufferState(SharedAbstractState):
     #: The readings' one gate, and the latest reading it admitted (the bank's input).
     readings: ReadingGate | None = None
     reading: AdmittedReading = field(default_factory=AdmittedReading)
-    #: The images' clock, the last frame it judged and its decision (step 1).
-    image_clock: StreamClock | None = None
-    frame_key: tuple = ()
-    frame_decision: StampDecision | None = None
-    #: The frame judged last (the object: the port holds the same one until a new
-    #: frame, and a DepthFrame is never changed in place).
-    judged_frame: DepthFrame | None = None
+    #: Each camera's clock and last judged frame, in the model's camera order.
+    cameras: dict[str, CameraFrames] = field(default_factory=dict)
+
+    @property
+    def image_clock(self) -> StreamClock:
+        """The first camera's images' clock (with one camera, the images' clock)."""
+        return next(iter(self.cameras.values())).clock
 
 
 def frame_key(frame: DepthFrame) -> tuple:
     """What tells two frames apart: the sequence number may restart, the stamp may
     repeat, both together do not."""
     return frame.sequence, repr(frame.capture_time_s)
+
+
+def camera_port_names(model: TrackerModel, cameras: Sequence[str] | None
+                      ) -> dict[str, str]:
+    """Camera name -> the prefix of its ports: ``""`` for the one-camera call
+    (``cameras`` None: the model's first camera, ports ``depth_frame``, ...), else
+    ``"<name>_"`` for each of ``cameras``. ValueError for no camera, a name given twice
+    or a camera the model does not have (naming the model's cameras)."""
+    if cameras is None:
+        return {model.camera_names[0]: ""}
+    names = list(cameras)
+    if not names:
+        raise ValueError(f"no camera given: name at least one of the model's cameras "
+                         f"{model.camera_names}")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"two cameras are named {twice[0]!r}: each camera of the tracker "
+                         "needs its own name")
+    for name in names:
+        model.camera(name)  # ValueError naming the model's cameras
+    return {name: f"{name}_" for name in model.camera_names if name in names}
 
 
 class DelayBufferSystem(LeafSystem):
@@ -84,25 +122,35 @@ class DelayBufferSystem(LeafSystem):
     anchor of the image on ``depth_frame`` (the prior at its time t'), or why there is
     none. Readings and images that cannot be used are skipped with a rate-limited
     warning (``core/sensors/timestamps.py``).
+
+    With ``cameras`` (names of the model's cameras) each camera has its own
+    ``<name>_depth_frame`` input and ``<name>_image_prior`` output, and its images go
+    through their own clock (named ``image (<name>)``) into the one buffer, each at its
+    own time; ``image_observation`` takes every camera's observations.
     """
 
     def __init__(self, *, model: TrackerModel, params: TrackerParams | ResolvedParams,
-                 period_s: float, offset_s: float = 0.0) -> None:
+                 period_s: float, offset_s: float = 0.0,
+                 cameras: Sequence[str] | None = None) -> None:
         super().__init__()
         if not period_s > 0:
             raise ValueError(f"DelayBufferSystem: period_s must be > 0, got {period_s}")
         self._params = resolve_tracker_params(params, model)
-        stamps = self._params.timestamps
+        prefixes = camera_port_names(model, cameras)
+        stamps, several = self._params.timestamps, cameras is not None and len(prefixes) > 1
+        clocks = {name: CameraFrames(StreamClock(f"image ({name})" if several else "image",
+                                                 stamps, self._params.buffer_horizon_s))
+                  for name in prefixes}
         self._state = self.DeclareAbstractState(AbstractValue.Make(DelayBufferState(
-            readings=ReadingGate(stamps, model.robot_joint_names, log),
-            image_clock=StreamClock("image", stamps, self._params.buffer_horizon_s))))
+            readings=ReadingGate(stamps, model.robot_joint_names, log), cameras=clocks)))
         self._position = self.DeclareVectorInputPort(
             "measured_position", len(model.robot_joint_names))
         self._time = self.DeclareVectorInputPort("measurement_time", 1)
         self._observation = self.DeclareAbstractInputPort(
             "image_observation", AbstractValue.Make(ImageObservationMessage()))
-        self._frame = self.DeclareAbstractInputPort(
-            "depth_frame", AbstractValue.Make(DepthFrame.empty()))
+        self._frames = {name: self.DeclareAbstractInputPort(
+            f"{prefix}depth_frame", AbstractValue.Make(DepthFrame.empty()))
+            for name, prefix in prefixes.items()}
         state = {self.abstract_state_ticket(self._state)}
         self._index = int(self._state)  # pydrake takes a plain int fastest
         self._reading_out = self.DeclareAbstractOutputPort(
@@ -111,10 +159,26 @@ class DelayBufferSystem(LeafSystem):
         self._correction_out = self.DeclareAbstractOutputPort(
             "correction", lambda: AbstractValue.Make(BeliefCorrection()),
             lambda c, o: o.set_value(self.state(c).correction), state)
-        self._prior_out = self.DeclareAbstractOutputPort(
-            "image_prior", lambda: AbstractValue.Make(ImagePrior()), self.CalcImagePrior,
-            state | {self._frame.ticket()})
+        self._priors_out = {name: self.DeclareAbstractOutputPort(
+            f"{prefix}image_prior", lambda: AbstractValue.Make(ImagePrior()),
+            lambda c, o, name=name: self.CalcImagePrior(c, o, name),
+            state | {self._frames[name].ticket()}) for name, prefix in prefixes.items()}
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, offset_s, self._update)
+
+    @property
+    def camera_names(self) -> list[str]:
+        """The cameras whose images the buffer takes, in the model's order."""
+        return list(self._frames)
+
+    def _camera(self, camera: str | None) -> str:
+        if camera is None:
+            if len(self._frames) > 1:
+                raise ValueError(f"the buffer has the cameras {self.camera_names}: name one")
+            return self.camera_names[0]
+        if camera not in self._frames:
+            raise ValueError(f"unknown camera '{camera}': the buffer's cameras are "
+                             f"{self.camera_names}")
+        return camera
 
     def get_measured_position_input_port(self) -> InputPort:
         """The ``measured_position`` input port."""
@@ -128,9 +192,9 @@ class DelayBufferSystem(LeafSystem):
         """The ``image_observation`` input port."""
         return self._observation
 
-    def get_depth_frame_input_port(self) -> InputPort:
-        """The ``depth_frame`` input port."""
-        return self._frame
+    def get_depth_frame_input_port(self, camera: str | None = None) -> InputPort:
+        """The ``depth_frame`` input port of ``camera`` (None: the only camera)."""
+        return self._frames[self._camera(camera)]
 
     def get_reading_output_port(self) -> OutputPort:
         """The ``reading`` output port."""
@@ -140,9 +204,9 @@ class DelayBufferSystem(LeafSystem):
         """The ``correction`` output port."""
         return self._correction_out
 
-    def get_image_prior_output_port(self) -> OutputPort:
-        """The ``image_prior`` output port."""
-        return self._prior_out
+    def get_image_prior_output_port(self, camera: str | None = None) -> OutputPort:
+        """The ``image_prior`` output port of ``camera`` (None: the only camera)."""
+        return self._priors_out[self._camera(camera)]
 
     def state(self, context: Context) -> DelayBufferState:
         """The buffer, the gate, the clocks and the latest messages, in ``context``."""
@@ -151,7 +215,9 @@ class DelayBufferSystem(LeafSystem):
     def _update(self, context: Context, state) -> EventStatus | None:
         s = self.state(context).copy()  # the stored one is shared with Drake's copies
         # Frames are judged against the buffer the CPF system saw (before this reading).
-        changed = self._judge_frame(self._frame.Eval(context), s)
+        changed = False
+        for name, port in self._frames.items():
+            changed |= self._judge_frame(name, port.Eval(context), s)
         raw = self._time.EvalBasicVector(context)[0]
         if s.readings.is_new(raw):
             changed = True
@@ -204,22 +270,24 @@ class DelayBufferSystem(LeafSystem):
                                         belief, s.buffer.bank.bias_process_var)
         s.reading = replace(s.reading, correction_id=s.correction.id)  # the bank looks
 
-    def _judge_frame(self, frame: DepthFrame, s: DelayBufferState) -> bool:
-        """Step 1, once per new frame; whether there was one."""
-        if frame is s.judged_frame or frame.is_empty or s.buffer is None:
+    def _judge_frame(self, camera: str, frame: DepthFrame, s: DelayBufferState) -> bool:
+        """Step 1, once per new frame of ``camera``; whether there was one."""
+        judged = s.cameras[camera]
+        if frame is judged.frame or frame.is_empty or s.buffer is None:
             return False
         key = frame_key(frame)
-        if key == s.frame_key:
+        if key == judged.key:
             return False
-        s.frame_key, s.judged_frame = key, frame
-        s.image_clock = s.image_clock.copy()
-        s.frame_decision = judge_stamp(frame, s.image_clock, s.buffer, s.readings.clock,
-                                       self._params, log)
+        clock = judged.clock.copy()
+        decision = judge_stamp(frame, clock, s.buffer, s.readings.clock, self._params, log)
+        s.cameras = {**s.cameras, camera: CameraFrames(clock, key, decision, frame)}
         return True
 
-    def CalcImagePrior(self, context: Context, output: AbstractValue) -> None:
-        """Step 3 for the frame on ``depth_frame``: its :class:`ImagePrior`."""
-        s, frame = self.state(context), self._frame.Eval(context)
+    def CalcImagePrior(self, context: Context, output: AbstractValue,
+                       camera: str | None = None) -> None:
+        """Step 3 for the frame on ``camera``'s ``depth_frame``: its :class:`ImagePrior`."""
+        camera = self._camera(camera)
+        s, frame = self.state(context), self._frames[camera].Eval(context)
         if frame.is_empty:
             output.set_value(ImagePrior())
             return
@@ -228,8 +296,9 @@ class DelayBufferSystem(LeafSystem):
                                         "no joint reading yet"))
             return
         # The decision the next update will take for a frame it has not judged yet.
-        decision = s.frame_decision if frame_key(frame) == s.frame_key else \
-            s.image_clock.peek(image_time(frame, self._params))
+        judged = s.cameras[camera]
+        decision = judged.decision if frame_key(frame) == judged.key else \
+            judged.clock.peek(image_time(frame, self._params))
         if decision.time_s is None:
             output.set_value(ImagePrior(frame.sequence, float("nan"), None, decision.problem))
             return

@@ -91,6 +91,11 @@ class JointKalmanBankSystem(LeafSystem):
     estimated camera frame, ``X_WE`` the hand and ``X_WC`` the estimated camera in the
     model's world. Before the first reading the estimate is the zero configuration.
 
+    With several cameras in ``model`` (``RobotConfig.cameras``), each camera ``<name>``
+    also has ``<name>_camera_offset`` (its six virtual joints) and ``<name>_X_WC`` (its
+    estimated frame in the model's world); ``camera_offset``, ``X_CE`` and ``X_WC`` are
+    the first camera's.
+
     Discrete state: ``belief`` (:meth:`belief`), ``bookkeeping`` (:meth:`bookkeeping`)
     and ``bias_process_var`` (:meth:`bias_process_var`: the σb² the bank runs with, the
     buffer's after each image).
@@ -131,7 +136,26 @@ class JointKalmanBankSystem(LeafSystem):
             self._outputs[name] = self.DeclareAbstractOutputPort(
                 name, lambda: AbstractValue.Make(RigidTransform()),
                 lambda c, o, k=k: o.set_value(self._poses.Eval(c)[k]), deps)
+        if len(model.cameras) > 1:
+            self._declare_camera_outputs(model, deps)
         self.DeclarePeriodicDiscreteUpdateEvent(period_s, offset_s, self._update)
+
+    def _declare_camera_outputs(self, model: TrackerModel, deps: set) -> None:
+        """Each camera's ``<name>_camera_offset`` and ``<name>_X_WC`` outputs."""
+        self._camera_frames = {}
+        for camera in model.cameras:
+            indices = model.camera_joint_indices(camera.name)
+            self._outputs[f"{camera.name}_camera_offset"] = self.DeclareVectorOutputPort(
+                f"{camera.name}_camera_offset", 6,
+                lambda c, o, k=indices: o.SetFromVector(self.belief(c)[MEAN_A, k]), deps)
+            X_BC = camera.frame.GetFixedPoseInBodyFrame().GetAsMatrix4()
+            self._camera_frames[camera.name] = (int(camera.frame.body().index()), X_BC)
+        self._camera_poses = self.DeclareCacheEntry("camera_poses", ValueProducer(
+            allocate=AbstractValue.Make({}).Clone, calc=self.CalcCameraPoses), deps)
+        for name in self._camera_frames:
+            self._outputs[f"{name}_X_WC"] = self.DeclareAbstractOutputPort(
+                f"{name}_X_WC", lambda: AbstractValue.Make(RigidTransform()),
+                lambda c, o, name=name: o.set_value(self._camera_poses.Eval(c)[name]), deps)
 
     def get_reading_input_port(self) -> InputPort:
         """The ``reading`` input port."""
@@ -215,3 +239,10 @@ class JointKalmanBankSystem(LeafSystem):
         """X_CE, X_WE and X_WC of the belief's mean angles."""
         value.set_value(tuple(RigidTransform(X[0]) for X in
                               self._readout.poses(self.belief(context)[MEAN_A])))
+
+    def CalcCameraPoses(self, context: Context, value: AbstractValue) -> None:
+        """Each camera's estimated frame in the world (name -> X_WC) at the belief's mean
+        angles."""
+        X_WB = self._readout.body_poses(self.belief(context)[MEAN_A])[0]
+        value.set_value({name: RigidTransform(X_WB[body] @ X_BC)
+                         for name, (body, X_BC) in self._camera_frames.items()})

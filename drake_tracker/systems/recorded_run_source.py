@@ -6,7 +6,7 @@ import logging
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector, LeafSystem, OutputPort
 
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.io.recording import RecordedRun
@@ -47,6 +47,35 @@ class LatestAtOrBefore:
         return int(np.searchsorted(self._times, t, side="right")) - 1
 
 
+class _ImageStream:
+    """One camera's recorded images, shown at their arrivals (each ``DepthFrame`` made
+    once, when it is first shown; image ``i`` has sequence number ``i``)."""
+
+    def __init__(self, name: str, capture_s: np.ndarray, arrival_s: np.ndarray,
+                 images: np.ndarray) -> None:
+        self.name, self._capture, self._arrival, self._images = name, capture_s, arrival_s, images
+        arrivals = np.asarray(arrival_s, float)
+        order = np.argsort(arrivals, kind="stable")
+        playable = np.isfinite(arrivals[order])
+        self.order, self.unplayable = order[playable], order[~playable]
+        self._latest = LatestAtOrBefore(arrivals[self.order])
+        self._frame_at = (-1, DepthFrame.empty())
+
+    def frame_at(self, t: float) -> DepthFrame:
+        """The latest image that arrived at or before ``t`` (``DepthFrame.empty()``
+        before the first)."""
+        j = self._latest(t)
+        if j != self._frame_at[0]:
+            if j < 0:
+                frame = DepthFrame.empty()
+            else:
+                i = int(self.order[j])
+                frame = DepthFrame(float(self._capture[i]), float(self._arrival[i]),
+                                   self._images[i], i)
+            self._frame_at = (j, frame)
+        return self._frame_at[1]
+
+
 class RecordedRunSource(LeafSystem):
     """Outputs, at time t, the latest reading stamped at or before t and the latest image
     that arrived at or before t, so a Diagram sees what the live sensors would show.
@@ -61,33 +90,52 @@ class RecordedRunSource(LeafSystem):
 
     ``measurement_time`` is -1 before the first reading; ``depth_frame`` is
     ``DepthFrame.empty()`` before the first arrival. Image ``i`` of the run has
-    sequence number ``i``.
+    sequence number ``i``. A run of several cameras (``RecordedRun.other_cameras``) has
+    a ``<name>_depth_frame`` port for each camera too (the first camera's is also
+    ``depth_frame``), each image ``i`` of a camera with sequence number ``i``.
     """
 
     def __init__(self, run: RecordedRun):
         super().__init__()
         self._run = run
-        self._arrival_order, unplayable = run.images_in_arrival_order()
+        first = _ImageStream(run.camera_name, run.image_capture_times_s,
+                             run.image_arrival_times_s, run.depth_images_m)
+        streams = [first] + [_ImageStream(c.name, c.capture_times_s, c.arrival_times_s,
+                                          c.depth_images_m) for c in run.other_cameras]
         #: Images whose arrival stamp is not a time: never shown (warned about here).
-        self.num_unplayable_images = len(unplayable)
-        if self.num_unplayable_images:
-            log.warning("%d image(s) of the run have no finite arrival stamp and are never "
-                        "shown (images %s)", self.num_unplayable_images,
-                        unplayable[:10].tolist())
-        self._arrivals = run.image_arrival_times_s[self._arrival_order]
+        self.num_unplayable_images = sum(len(stream.unplayable) for stream in streams)
+        for stream in streams:
+            if len(stream.unplayable):
+                log.warning("%d image(s) of camera '%s' have no finite arrival stamp and "
+                            "are never shown (images %s)", len(stream.unplayable),
+                            stream.name, stream.unplayable[:10].tolist())
         n = len(run.joint_names)
         self.DeclareVectorOutputPort("measured_position", n, self._calc_position,
                                      {self.time_ticket()})
         self.DeclareVectorOutputPort("measurement_time", 1, self._calc_time,
                                      {self.time_ticket()})
+        self._streams = {stream.name: stream for stream in streams}
+        self._first = first.name
         self.DeclareAbstractOutputPort("depth_frame", lambda: AbstractValue.Make(
             DepthFrame.empty()), self._calc_frame, {self.time_ticket()})
+        for stream in streams if run.other_cameras else ():
+            calc = self._calc_frame if stream is first else (
+                lambda c, o, name=stream.name: self._calc_camera_frame(c, o, name))
+            self.DeclareAbstractOutputPort(
+                f"{stream.name}_depth_frame", lambda: AbstractValue.Make(DepthFrame.empty()),
+                calc, {self.time_ticket()})
         # The outputs are functions of time alone: the latest lookups are kept (the
-        # three ports are read at every step, at the same time), and each image's
-        # DepthFrame is made once, when it is first shown.
+        # ports are read at every step, at the same time).
         self._latest_reading = LatestAtOrBefore(run.reading_times_s)
-        self._latest_arrival = LatestAtOrBefore(self._arrivals)
-        self._frame_at = (-1, DepthFrame.empty())
+
+    def get_depth_frame_output_port(self, camera: str | None = None) -> OutputPort:
+        """The ``depth_frame`` port of the camera named ``camera`` (None: the first)."""
+        if camera is None or (camera == self._first and len(self._streams) == 1):
+            return self.GetOutputPort("depth_frame")
+        if camera not in self._streams:
+            raise ValueError(f"unknown camera '{camera}': the run's cameras are "
+                             f"{list(self._streams)}")
+        return self.GetOutputPort(f"{camera}_depth_frame")
 
     def _calc_position(self, context, output: BasicVector):
         k = self._latest_reading(context.get_time())
@@ -98,16 +146,8 @@ class RecordedRunSource(LeafSystem):
         output.SetAtIndex(0, self._run.reading_times_s[k] if k >= 0 else -1.0)
 
     def _calc_frame(self, context, output):
-        j = self._latest_arrival(context.get_time())
-        if j != self._frame_at[0]:
-            self._frame_at = (j, self._frame(j))
-        output.set_value(self._frame_at[1])
+        """The first camera's latest image (``depth_frame``)."""
+        self._calc_camera_frame(context, output, self._first)
 
-    def _frame(self, j: int) -> DepthFrame:
-        """The j-th image to arrive (``DepthFrame.empty()`` for j < 0)."""
-        if j < 0:
-            return DepthFrame.empty()
-        i = int(self._arrival_order[j])
-        run = self._run
-        return DepthFrame(float(run.image_capture_times_s[i]),
-                          float(run.image_arrival_times_s[i]), run.depth_images_m[i], i)
+    def _calc_camera_frame(self, context, output, camera: str):
+        output.set_value(self._streams[camera].frame_at(context.get_time()))

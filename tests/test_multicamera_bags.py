@@ -1,0 +1,113 @@
+"""Bags of several depth cameras (issue 46): ``record --bag`` writes each camera's
+images on its own topics, ``track --bag`` takes each as a camera of the model
+(``--depth-topic NAME=TOPIC``), and the round trip gives the estimates of
+``track --run`` on the same run; bad camera topics are one-line errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rosbags")
+
+from fast_params import small_params  # noqa: E402
+from test_cli import assert_one_line_error, run_cli  # noqa: E402
+
+from drake_tracker.io.bag_source import BagSource, BagTopics, CameraTopics  # noqa: E402
+from drake_tracker.io.estimates_out import read_estimates_csv  # noqa: E402
+from drake_tracker.io.replay import model_for_run  # noqa: E402
+from drake_tracker.io.run_bag import write_run_bag  # noqa: E402
+from drake_tracker.params.loading import tracker_params_to_yaml  # noqa: E402
+
+DEPTH = ["--depth-topic", "camera=/camera/depth/image_raw",
+         "--depth-topic", "post_camera=/post_camera/depth/image_raw"]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """1.5 s of a two-camera preset, stamped in ns, as a run, a bag, a robot file and
+    the test's parameters."""
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario.load import load_scenario
+
+    folder = tmp_path_factory.mktemp("two_cameras")
+    run = simulate_and_record(load_scenario("occlusion-lasting-2cam/constant"),
+                              duration_s=1.5).stamped_in_nanoseconds()
+    run.save(folder / "run.npz")
+    write_run_bag(run, folder / "run.mcap")
+    (folder / "robot.yaml").write_text(run.robot_config_yaml)
+    (folder / "params.yaml").write_text(tracker_params_to_yaml(small_params()))
+    return run, folder
+
+
+def test_each_camera_has_its_own_topics_in_the_bag(recorded):
+    run, folder = recorded
+    model = model_for_run(run)
+    source = BagSource(folder / "run.mcap", model.robot_joint_names, BagTopics(cameras=(
+        CameraTopics("camera", "/camera/depth/image_raw"),
+        CameraTopics("post_camera", "/post_camera/depth/image_raw"))))
+    try:
+        assert [c.camera_info_topic for c in source.cameras] == [
+            "/camera/depth/camera_info", "/post_camera/depth/camera_info"]
+        assert source.camera_models() == {"camera": run.camera_intrinsics,
+                                          "post_camera": run.other_cameras[0].intrinsics}
+        images = [e for e in source.events() if hasattr(e, "depth")]
+    finally:
+        source.close()
+    for name, capture, depth in (
+            ("camera", run.image_capture_times_s, run.depth_images_m),
+            ("post_camera", run.other_cameras[0].capture_times_s,
+             run.other_cameras[0].depth_images_m)):
+        mine = [e for e in images if e.camera == name]
+        assert [e.sequence for e in mine] == list(range(len(capture)))
+        np.testing.assert_array_equal([e.capture_s for e in mine], capture)
+        np.testing.assert_array_equal(np.stack([e.depth for e in mine]), depth)
+
+
+def test_tracking_the_bag_gives_the_estimates_of_the_run(recorded, capsys):
+    run, folder = recorded
+    params = str(folder / "params.yaml")
+    code, _, err = run_cli(["track", "--run", str(folder / "run.npz"), "--params", params,
+                            "--out", str(folder / "from_run")], capsys)
+    assert code == 0, err
+    code, _, err = run_cli(["track", "--bag", str(folder / "run.mcap"), "--robot",
+                            str(folder / "robot.yaml"), "--params", params, *DEPTH,
+                            "--out", str(folder / "from_bag")], capsys)
+    assert code == 0, err
+    direct = json.loads((folder / "from_run" / "report.json").read_text())
+    from_bag = json.loads((folder / "from_bag" / "report.json").read_text())
+    assert direct["counts"] == from_bag["counts"]
+    # Both cameras' images were taken: none skipped as an unknown camera's.
+    assert direct["counts"]["images"] == len(run.image_capture_times_s) + len(
+        run.other_cameras[0].capture_times_s)
+    assert not direct["counts"]["source_skipped"]
+    assert from_bag["input"]["cameras"]["post_camera"][1] == "/post_camera/depth/camera_info"
+    a = read_estimates_csv(folder / "from_run" / "estimates.csv")
+    b = read_estimates_csv(folder / "from_bag" / "estimates.csv")
+    assert len(a["t_s"]) == len(run.reading_times_s)
+    offsets = [c for c in a if c.startswith("post_camera_")]
+    assert len(offsets) == 6 and np.any(a[offsets[0]] != 0.0)  # the second camera's own
+    for column in a:
+        if column in ("health", "t0_s"):
+            continue
+        np.testing.assert_allclose(b[column], a[column], rtol=0, atol=1e-9, err_msg=column)
+    assert (a["health"] == b["health"]).all()
+
+
+@pytest.mark.parametrize("flags, fragment", [
+    (["--depth-topic", "side=/camera/depth/image_raw"], "unknown camera 'side'"),
+    (["--depth-topic", "camera=/camera/depth/image_raw",
+      "--depth-topic", "camera=/post_camera/depth/image_raw"], "two cameras are named"),
+    (["--depth-topic", "camera=/camera/depth/image_raw",
+      "--depth-topic", "/post_camera/depth/image_raw"], "all NAME=TOPIC"),
+    (["--depth-topic", "/camera/depth/image_raw",
+      "--depth-topic", "/post_camera/depth/image_raw"], "name each camera"),
+    ([*DEPTH, "--camera-info-topic", "side=/camera/depth/camera_info"],
+     "no --depth-topic side=TOPIC"),
+    (["--depth-topic", "camera=/nowhere"], "no sensor_msgs/msg/Image topic '/nowhere'"),
+])
+def test_bad_camera_topics_are_one_line_errors(recorded, capsys, flags, fragment):
+    _, folder = recorded
+    code, _, err = run_cli(["track", "--bag", str(folder / "run.mcap"), "--robot",
+                            str(folder / "robot.yaml"), *flags], capsys)
+    assert_one_line_error(code, err, fragment)
