@@ -22,9 +22,15 @@ import drake_tracker
 
 
 def top_level_names_in(module_name: str) -> list[str]:
-    """The names of ``drake_tracker.__all__`` whose object is defined in ``module_name``."""
-    return sorted(name for name in drake_tracker.__all__
-                  if getattr(getattr(drake_tracker, name), "__module__", None) == module_name)
+    """The names under which ``module_name`` holds an object of ``drake_tracker.__all__``:
+    those it defines, and those it imports and re-exports (e.g. ``robot.model`` the
+    configuration classes of ``robot.config``), which autodoc would document again."""
+    module = importlib.import_module(module_name)
+    top = {id(getattr(drake_tracker, name)) for name in drake_tracker.__all__}
+    return sorted(name for name, value in vars(module).items()
+                  if not name.startswith("_") and id(value) in top
+                  and (getattr(value, "__module__", None) == module_name
+                       or name in getattr(module, "__all__", ())))
 
 
 def package_modules(package_name: str) -> list[str]:
