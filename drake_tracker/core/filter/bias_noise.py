@@ -26,6 +26,11 @@ to) and ``q_max`` the variance of the start's bias prior per second (a bias that
 by its whole prior range within a second is a jump, not a drift: the jump model of the
 image update follows those). Only robot joints with a bias adapt; the virtual camera
 joints keep their σb (a drift of the arm must not be explained by a moving camera).
+
+The rate is learnt in the order the images are applied: an image older than the latest
+applied one (out of order) informs no rate, so the buffer's exactness for out-of-order
+images (the same belief as the observations inserted in time order) holds for the
+observations at given rates, not for the rates themselves.
 """
 
 from __future__ import annotations
