@@ -84,7 +84,11 @@ class BiasNoiseMatch:
                 or not observation.informs_bias_noise:
             return replace(self, last_image_s=max(t, self.last_image_s))
         precision = observation.precision
-        seen = self.adapts & (precision > 0) & (prior[VAR_A] > 0)
+        # A joint counts where the image says at least as much as the prior (R <= s):
+        # there the shift of the CPF's mean is mostly information; where the image says
+        # little, it is mostly the mean's Monte-Carlo error (about s / N_eff), which the
+        # observation's R does not hold, and which would read as a drift.
+        seen = self.adapts & (precision * prior[VAR_A] >= 1.0)
         if not seen.any():
             return replace(self, last_image_s=t)
         safe = np.where(seen, precision, 1.0)
