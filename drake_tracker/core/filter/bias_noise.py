@@ -25,7 +25,11 @@ with ``q_min`` the configured σb² (the model never trusts the bias more than i
 to) and ``q_max`` the variance of the start's bias prior per second (a bias that moved
 by its whole prior range within a second is a jump, not a drift: the jump model of the
 image update follows those). Only robot joints with a bias adapt; the virtual camera
-joints keep their σb (a drift of the arm must not be explained by a moving camera).
+joints keep their σb (a drift of the arm must not be explained by a moving camera). A
+joint's innovation counts only where the image says at least as much as the prior
+(``R <= s``): where it says little, the shift of the CPF's mean is mostly its
+Monte-Carlo error (about ``s / N_eff``), which ``R`` does not hold and which would read
+as a drift. Off by default (``JointNoise.match_bias_noise_to_images``).
 
 The rate is learnt in the order the images are applied: an image older than the latest
 applied one (out of order) informs no rate, so the buffer's exactness for out-of-order
