@@ -220,3 +220,20 @@ def test_an_image_that_scores_every_particle_the_same_leaves_the_belief(scene):
     np.testing.assert_allclose(outcome.observation.apply(prior), prior, rtol=1e-12, atol=0)
 
 
+
+
+def test_a_restart_keeps_the_joints_it_leaves_untouched():
+    """With several cameras a camera's restart leaves the other cameras' joints as the
+    prior has them (means, variances and covariances), in each kind of restart."""
+
+    rng = np.random.default_rng(3)
+    prior = rng.normal(size=(5, 6))
+    prior[2:5:2] = np.abs(prior[2:5:2]) + 0.1
+    untouched = np.array([4, 5])
+    base = Restart(np.full(6, 0.01), np.full(6, 0.02), untouched=untouched)
+    for restart in (base, base.kept(), base.pinned(np.full(6, 0.3))):
+        after = restart.apply(prior)
+        np.testing.assert_array_equal(after[:, untouched], prior[:, untouched])
+        plain = Restart(restart.angle_var, restart.bias_var, restart.pinned_angle,
+                        restart.keep_bias).apply(prior)
+        np.testing.assert_array_equal(after[:, :4], plain[:, :4])

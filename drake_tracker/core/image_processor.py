@@ -113,7 +113,10 @@ class ImageProcessor:
         self._jump_std = joints.jump_std
         start = initial_moments(np.zeros(len(joints.names)), joints.initial_angle_std,
                                 joints.initial_bias_std, joints.has_bias)
-        self.restart = Restart(start[VAR_A], start[VAR_B])  # the variances of the start
+        # The variances of the start; another camera's joints are kept as they are.
+        left = params.left_joints_for(camera_name)
+        self.restart = Restart(start[VAR_A], start[VAR_B],
+                               untouched=left if len(left) else None)
         self.update = CpfImageUpdate(
             model, camera, list(params.blocks_for(camera_name)), im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,

@@ -71,6 +71,18 @@ class ResolvedParams:
     #: camera moves the robot joints and that camera's six virtual joints only. Empty:
     #: ``blocks`` for the one camera.
     camera_blocks: tuple[tuple[str, tuple[np.ndarray, ...]], ...] = ()
+    #: (camera name, indices of the joints its images leave as they are: the other
+    #: cameras' offset joints and the joints that move only another camera) of each
+    #: camera; empty with one camera. A restart from a camera's image keeps them.
+    camera_left_joints: tuple[tuple[str, np.ndarray], ...] = ()
+
+    def left_joints_for(self, camera: str | None) -> np.ndarray:
+        """Indices of the joints camera ``camera``'s images leave as they are (empty
+        with one camera)."""
+        for name, left in self.camera_left_joints:
+            if name == camera:
+                return left
+        return np.zeros(0, np.int64)
 
     def blocks_for(self, camera: str | None) -> tuple[np.ndarray, ...]:
         """The CPF blocks of camera ``camera``'s images (None: ``blocks``)."""

@@ -36,11 +36,13 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
     camera_chains = {c.name: camera_chain_joints(model.for_camera(c.name))
                      for c in model.cameras}
     per_camera = []  # each camera's blocks (see other_cameras_joints)
+    left_joints = []
     for camera in model.cameras:
         own = camera.virtual_joint_names
+        left = other_cameras_joints(model, camera.name, camera_chains)
         per_camera.append((camera.name, tuple(resolve_blocks(
-            params, names, camera_chains[camera.name], own,
-            other_cameras_joints(model, camera.name, camera_chains)))))
+            params, names, camera_chains[camera.name], own, left))))
+        left_joints.append((camera.name, np.array([names.index(n) for n in left], np.int64)))
     chains = {n for c in camera_chains.values() for n in c}
     chain = [n for n in names if n in chains]
     noise = joint_noise_for(params, names, model.prismatic_joint_names, virtual)
@@ -80,6 +82,7 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
         blocks=per_camera[0][1],
         camera_chain=tuple(chain),
         camera_blocks=tuple(per_camera),
+        camera_left_joints=tuple(left_joints) if len(model.cameras) > 1 else (),
         image=params.image,
         health=params.health,
         timestamps=params.timestamps,

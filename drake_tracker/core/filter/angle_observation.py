@@ -45,14 +45,19 @@ class Restart:
     bias_var: np.ndarray
     pinned_angle: np.ndarray | None = None
     keep_bias: bool = False
+    #: Indices of joints whose prior the restart keeps as it is (with several cameras:
+    #: the joints a camera's images leave, ``ResolvedParams.left_joints_for``: another
+    #: camera's offset is not this camera's to forget).
+    untouched: np.ndarray | None = None
 
     def pinned(self, angle: np.ndarray | None) -> Restart:
         """This restart with ``pinned_angle`` = ``angle`` (None: none pinned)."""
-        return Restart(self.angle_var, self.bias_var, angle)
+        return Restart(self.angle_var, self.bias_var, angle, untouched=self.untouched)
 
     def kept(self) -> Restart:
         """This restart keeping the biases and the camera offset (``keep_bias``)."""
-        return Restart(self.angle_var, self.bias_var, None, keep_bias=True)
+        return Restart(self.angle_var, self.bias_var, None, keep_bias=True,
+                       untouched=self.untouched)
 
     def apply(self, prior: np.ndarray) -> np.ndarray:
         """The restarted (5, n) belief: angle means ``a + b`` of ``prior`` (or the pinned
@@ -64,6 +69,8 @@ class Restart:
             kept[VAR_A] += self.bias_var
             kept[VAR_B] += self.bias_var
             kept[COV_AB] -= self.bias_var
+            if self.untouched is not None and len(self.untouched):
+                kept[:, self.untouched] = prior[:, self.untouched]
             return kept
         restarted = np.zeros_like(prior)
         restarted[MEAN_A] = prior[MEAN_A] + prior[MEAN_B]
@@ -73,6 +80,8 @@ class Restart:
             restarted[MEAN_A, pin] = self.pinned_angle[pin]
         restarted[VAR_A] = self.angle_var
         restarted[VAR_B] = self.bias_var
+        if self.untouched is not None and len(self.untouched):
+            restarted[:, self.untouched] = prior[:, self.untouched]
         return restarted
 
 
