@@ -258,3 +258,25 @@ def test_an_image_of_one_of_several_cameras_that_shows_no_arm_is_not_applied(apo
             np.testing.assert_array_equal(tracker.estimate().positions, before)
             assert tracker.warnings.counts["images that show no arm"] == 1
     assert applied == {"several": False, "alone": True}
+
+
+def test_the_reported_health_is_the_first_cameras_while_it_tracks():
+    """The health describes X_CE, in the first camera's frame: another camera that
+    tracks the arm makes it at best uncertain; one camera reports its own."""
+    from types import SimpleNamespace
+
+    from drake_tracker.core.cameras import best_health
+    from drake_tracker.core.robustness.health import HealthState, TrackerHealth
+
+    def channels(*states):
+        return {f"c{k}": SimpleNamespace(health=TrackerHealth(state, restarts=k))
+                for k, state in enumerate(states)}
+
+    T, U, L = HealthState.TRACKING, HealthState.UNCERTAIN, HealthState.LOST
+    assert best_health(channels(T, L)).restarts == 0
+    assert best_health(channels(U, T)).state == U
+    assert best_health(channels(U, T)).restarts == 1  # the best camera's counts
+    assert best_health(channels(L, U)).state == U
+    assert best_health(channels(L, L)).state == L
+    for state in (T, U, L):
+        assert best_health(channels(state)).state == state
