@@ -9,23 +9,25 @@ layer, ~35 particles each, about 0.5 ms of work on one thread). What a layer cos
 start and end such a call decides whether a second thread helps. Measured by
 ``drake-tracker bench`` on a 2-core Zen 4 VM (image updates/s, 1 thread -> 2 threads):
 
-* ``workqueue`` (ships with numba): 31 -> 23. Its workers sleep on a condition variable
-  and are woken per call, about 0.2 ms a call: a second thread made an update slower.
-* ``omp`` (GNU OpenMP) with its default spin (300,000 iterations): 31 -> 42. Its idle
-  workers spin before they sleep, which on a loaded machine steals the core that the
-  serial part of the sweep (sampling, resampling) or the Drake Simulator needs.
-* ``omp`` with ``GOMP_SPINCOUNT`` 10,000 (:data:`DEFAULT_GOMP_SPINCOUNT`): 31 -> 41-48.
-  The workers spin through the gap between two blocks (tens of microseconds), then sleep.
+* ``workqueue`` (ships with numba, the default here): forced onto two threads, 31 ->
+  23. Its workers sleep on a condition variable and are woken per call, about 0.2 ms a
+  call, so :class:`SerialOrParallel` keeps the sweep on one thread.
+* ``omp`` (GNU OpenMP) with ``GOMP_SPINCOUNT`` 10,000 (:data:`DEFAULT_GOMP_SPINCOUNT`):
+  31 -> 41-48. The workers spin through the gap between two blocks (tens of
+  microseconds), then sleep. With OpenMP's default spin (300,000 iterations), idle
+  workers steal the core that the serial part of the sweep, or the Drake Simulator,
+  needs.
 
-So the layers are tried in the order of :data:`PREFERRED_LAYERS` (``omp`` needs the
-system's ``libgomp.so.1``; without it numba falls back to ``workqueue``), and the spin is
-bounded unless the user set ``GOMP_SPINCOUNT`` or ``OMP_WAIT_POLICY``. Whatever the layer,
-:class:`SerialOrParallel` keeps a sweep on one thread while the parallel run is the dearer
-(a loaded machine). A user's ``NUMBA_THREADING_LAYER`` always wins over this default.
-
-Forks: GNU OpenMP is not fork-safe once its threads exist. The evaluation's pools spawn
-their processes; a forked child that launches a parallel kernel after the parent did is
-stopped by numba with a message saying so.
+``omp`` is not the default because GNU OpenMP is not fork-safe. A child forked from a
+process that has run a parallel kernel is terminated by numba at its first parallel
+launch ("fork() called from a process already using GNU OpenMP"), even with one
+thread, and ``multiprocessing`` forks by default on Linux. ``workqueue`` has no such
+limit. A user whose processes are spawned, not forked, can choose
+``NUMBA_THREADING_LAYER=omp`` for the second core; the spin is then bounded unless
+``GOMP_SPINCOUNT`` or ``OMP_WAIT_POLICY`` is set. Whatever the layer,
+:class:`SerialOrParallel` keeps a sweep on one thread while the parallel run is the
+dearer. ``workqueue`` must not be entered from two Python threads at once; the tracker
+runs its kernels from one thread.
 """
 
 from __future__ import annotations
@@ -36,28 +38,26 @@ from collections.abc import Callable
 
 import numba
 
-#: The threading layers in the order they are tried when the user names none.
-PREFERRED_LAYERS = ("omp", "workqueue", "tbb")
-#: GNU OpenMP's spin (iterations) before an idle worker sleeps, unless the user sets one.
+#: The layer chosen when the user has not set ``NUMBA_THREADING_LAYER``.
+DEFAULT_THREADING_LAYER = "workqueue"
+#: GNU OpenMP's spin (iterations) before an idle worker sleeps, when the user chose
+#: ``omp`` and set no spin of their own.
 DEFAULT_GOMP_SPINCOUNT = "10000"
 
 
 def configure_threading_layer() -> str:
-    """Chooses the layer (:data:`PREFERRED_LAYERS`, first available) and bounds OpenMP's
-    spin (:data:`DEFAULT_GOMP_SPINCOUNT`), unless the environment names them.
-
-    Returns the configured layer setting: the user's ``NUMBA_THREADING_LAYER`` if set,
-    else ``"default"`` (numba then loads the first of ``THREADING_LAYER_PRIORITY`` it
-    can at its first parallel launch; :func:`numba.threading_layer` names it after).
-    Harmless once a layer is loaded: numba then keeps the one it has.
-    """
-    if not (os.environ.get("GOMP_SPINCOUNT") or os.environ.get("OMP_WAIT_POLICY")):
-        os.environ["GOMP_SPINCOUNT"] = DEFAULT_GOMP_SPINCOUNT
+    """Selects :data:`DEFAULT_THREADING_LAYER` unless the user's environment names a
+    layer; for ``omp`` bounds OpenMP's spin (:data:`DEFAULT_GOMP_SPINCOUNT`) unless the
+    environment sets one. Returns the configured layer name (what numba will load at
+    its first parallel launch). Harmless once a layer is loaded: numba then keeps it."""
     requested = os.environ.get("NUMBA_THREADING_LAYER", "").strip()
     if requested:
+        if requested == "omp" and not (os.environ.get("GOMP_SPINCOUNT")
+                                       or os.environ.get("OMP_WAIT_POLICY")):
+            os.environ["GOMP_SPINCOUNT"] = DEFAULT_GOMP_SPINCOUNT
         return requested
     if numba.config.THREADING_LAYER == "default":
-        numba.config.THREADING_LAYER_PRIORITY = list(PREFERRED_LAYERS)
+        numba.config.THREADING_LAYER = DEFAULT_THREADING_LAYER
     return str(numba.config.THREADING_LAYER)
 
 
