@@ -24,6 +24,7 @@ from drake_tracker.core.cameras import (
     CameraChannel,
     best_health,
     camera_channels,
+    camera_named,
     clock_disagreement,
 )
 from drake_tracker.core.cpf.image_update import check_depth_image
@@ -150,15 +151,9 @@ class Tracker:
     def channel(self, camera: str | None) -> CameraChannel:
         """The channel of the camera named ``camera`` (None: the only one); ValueError
         naming the tracker's cameras for an unknown name, or None with several."""
-        if camera is None:
-            if len(self.channels) > 1:
-                raise ValueError(f"the tracker has the cameras {list(self.channels)}: "
-                                 "name the image's camera (add_image(frame, camera=NAME))")
-            return next(iter(self.channels.values()))
-        if camera not in self.channels:
-            raise ValueError(f"image from unknown camera '{camera}': the tracker's cameras "
-                             f"are {list(self.channels)}")
-        return self.channels[camera]
+        return self.channels[camera_named(
+            camera, list(self.channels), "tracker",
+            "name the image's camera (add_image(frame, camera=NAME))")]
 
     def add_image(self, frame: DepthFrame, camera: str | None = None) -> bool:
         """A depth image of the camera named ``camera`` (None: the tracker's only one; an

@@ -65,6 +65,21 @@ def camera_channels(model: TrackerModel, cameras: dict, params: ResolvedParams
     return channels
 
 
+def camera_named(camera: str | None, names: list[str], owner: str,
+                 how_to_name: str = "name one") -> str:
+    """The camera ``camera`` among ``names`` (None: the only one), as the offline tracker
+    and the Drake systems resolve an image's camera: a ValueError naming ``owner``'s
+    cameras for an unknown name, or for None with several (``how_to_name`` says how to
+    name one)."""
+    if camera is None:
+        if len(names) > 1:
+            raise ValueError(f"the {owner} has the cameras {names}: {how_to_name}")
+        return names[0]
+    if camera not in names:
+        raise ValueError(f"unknown camera '{camera}': the {owner}'s cameras are {names}")
+    return camera
+
+
 def clock_disagreement(channel: CameraChannel, channels: dict[str, CameraChannel],
                        lag_s: float, horizon_s: float) -> str:
     """Why ``channel``'s image, which arrives ``lag_s`` after its time, says that its

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
 
-from drake_tracker.core.cameras import clock_disagreement
+from drake_tracker.core.cameras import camera_named, clock_disagreement
 from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.image_step import conclude_image
 from drake_tracker.core.robustness.health import TrackerHealth
@@ -130,14 +130,7 @@ class CpfImageUpdateSystem(LeafSystem):
         return list(self._frame_ports)
 
     def _camera(self, camera: str | None) -> str:
-        if camera is None:
-            if self._several:
-                raise ValueError(f"the system has the cameras {self.camera_names}: name one")
-            return self.camera_names[0]
-        if camera not in self._frame_ports:
-            raise ValueError(f"unknown camera '{camera}': the system's cameras are "
-                             f"{self.camera_names}")
-        return camera
+        return camera_named(camera, self.camera_names, "system")
 
     def get_depth_frame_input_port(self, camera: str | None = None) -> InputPort:
         """The ``depth_frame`` input port of ``camera`` (None: the only camera)."""

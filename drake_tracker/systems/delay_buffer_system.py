@@ -10,6 +10,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
 
+from drake_tracker.core.cameras import camera_named
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
 from drake_tracker.core.filter.start import full_reading, new_belief_buffer, start_reading_ok
 from drake_tracker.core.image_step import judge_stamp, place_image
@@ -171,14 +172,7 @@ class DelayBufferSystem(LeafSystem):
         return list(self._frames)
 
     def _camera(self, camera: str | None) -> str:
-        if camera is None:
-            if len(self._frames) > 1:
-                raise ValueError(f"the buffer has the cameras {self.camera_names}: name one")
-            return self.camera_names[0]
-        if camera not in self._frames:
-            raise ValueError(f"unknown camera '{camera}': the buffer's cameras are "
-                             f"{self.camera_names}")
-        return camera
+        return camera_named(camera, self.camera_names, "buffer")
 
     def get_measured_position_input_port(self) -> InputPort:
         """The ``measured_position`` input port."""
