@@ -6,6 +6,7 @@ import logging
 
 import numpy as np
 import pytest
+from test_tracker import small_params
 
 from drake_tracker.core.render.kinematics import BatchedKinematics
 from drake_tracker.core.sensors.camera import CameraIntrinsics
@@ -14,7 +15,6 @@ from drake_tracker.io.recording import CameraImages, RecordedRun
 from drake_tracker.io.replay import replay_run
 from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.params.resolve import resolve_tracker_params
-from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.robot.model import (
     VIRTUAL_JOINT_NAMES,
     CameraMount,
@@ -42,14 +42,6 @@ def two_camera_config():
 @pytest.fixture(scope="module")
 def two_cameras():
     return build_tracker_model(two_camera_config())
-
-
-def small_params(seed: int = 0) -> TrackerParams:
-    params = TrackerParams()
-    params.image.num_particles = 100
-    params.image.seed = seed
-    params.image.min_image_interval_s = 0.0
-    return params
 
 
 def test_each_camera_has_its_own_six_joints_and_one_camera_keeps_its_names(apollo,
