@@ -10,7 +10,8 @@ import pytest
 
 from drake_tracker.core.jit.numba_threading import (
     DEFAULT_GOMP_SPINCOUNT,
-    DEFAULT_THREADING_LAYER,
+    FORK_UNSAFE_LAYERS,
+    LAYER_PRIORITY,
     SerialOrParallel,
     configure_threading_layer,
 )
@@ -36,37 +37,97 @@ def test_user_environment_wins_over_the_default(monkeypatch):
     monkeypatch.setenv("GOMP_SPINCOUNT", "123")
     configure_threading_layer()
     assert os.environ["GOMP_SPINCOUNT"] == "123"  # the user's own spin wins
-    monkeypatch.delenv("NUMBA_THREADING_LAYER")
-    assert configure_threading_layer() in (DEFAULT_THREADING_LAYER,
-                                           str(numba.config.THREADING_LAYER))
+    monkeypatch.setenv("NUMBA_THREADING_LAYER", "workqueue")
+    monkeypatch.delenv("GOMP_SPINCOUNT")
+    assert configure_threading_layer() == "workqueue"
+    assert "GOMP_SPINCOUNT" not in os.environ  # not omp: the environment is left alone
 
 
 _FORK_PROBE = """
-import os, numba, numpy as np
-import drake_tracker.core.jit.numba_threading
-@numba.njit(parallel=True)
-def total(x):
-    s = 0.0
-    for i in numba.prange(x.shape[0]):
-        s += x[i]
-    return s
-assert total(np.ones(1000)) == 1000.0
+import os, sys, pickle
+import numba, numpy as np
+from drake_tracker.core.jit import numba_threading
+from drake_tracker.core.likelihood.pixel_model import (LikelihoodParams, prepare_observation,
+                                                       score_images)
+from drake_tracker.core.render.batched import BatchedDepthRenderer
+from drake_tracker.core.render.configurations import (default_view_configuration,
+                                                      random_configurations,
+                                                      synthetic_observation)
+from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.robot.model import build_tracker_model, robot_preset
+
+model = build_tracker_model(robot_preset("apollo"))
+renderer = BatchedDepthRenderer(model, CameraIntrinsics.from_fov(80, 60, np.radians(45)))
+center = default_view_configuration(model)
+observation = prepare_observation(synthetic_observation(renderer, center), LikelihoodParams())
+q = np.ascontiguousarray(random_configurations(model, 21, seed=3, spread_rad=0.05,
+                                               center=center))
+
+def everything():
+    images = renderer.render(q)  # kinematics and render_kernel
+    return (renderer.kinematics.body_poses(q), images, score_images(images, observation),
+            np.concatenate([renderer.score(q, observation) for _ in range(70)]))
+
+numba.set_num_threads(2)
+before = everything()  # the parallel kernels run: the layer's threads start
+read, write = os.pipe()
 pid = os.fork()
 if pid == 0:
-    os._exit(0 if total(np.ones(1000)) == 1000.0 else 3)
+    os.close(read)
+    allowed = numba_threading.parallel_allowed()
+    after = everything()
+    with os.fdopen(write, "wb") as f:
+        pickle.dump((allowed, after), f)
+    os._exit(0)
+os.close(write)
+with os.fdopen(read, "rb") as f:
+    data = f.read()
 _, status = os.waitpid(pid, 0)
-print(numba.threading_layer(), status)
+allowed, after = pickle.loads(data) if data else (None, None)
+same = after is not None and all(np.array_equal(x, y) for x, y in zip(before, after))
+print(numba.threading_layer(), status, allowed, same)
 """
 
 
-def test_the_default_layer_survives_a_fork():
-    """A process that ran a parallel kernel forks (``multiprocessing``'s default on
-    Linux), and the child runs one too: with the default layer the child finishes. (GNU
-    OpenMP's child is terminated: why ``omp`` is an opt-in.)"""
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_THREADING_LAYER"}
+def test_a_forked_child_runs_the_kernels_serially_and_gets_the_same_numbers():
+    """A process runs the package's kernels on two threads, then forks
+    (``multiprocessing``'s default on Linux), and the child runs them again. Under the
+    default layer (GNU OpenMP, which terminates a forked child at its first parallel
+    launch), the child must use the serial compilations and give the parent's numbers
+    bit for bit: kinematics, rendering, the pixel likelihood and the fused score."""
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY")}
     out = subprocess.run([sys.executable, "-c", _FORK_PROBE], env=env, check=True,
                          capture_output=True, text=True).stdout.split()
-    assert out[-2:] == [DEFAULT_THREADING_LAYER, "0"]
+    layer, status, allowed, same = out[-4:]
+    assert layer in LAYER_PRIORITY
+    assert status == "0"
+    assert same == "True"
+    assert allowed == str(layer not in FORK_UNSAFE_LAYERS)
+
+
+def test_the_default_prefers_openmp():
+    """Where numba can load GNU OpenMP (it can on the machines this project runs on),
+    the package's default is it: the layer whose second thread helps."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_THREADING_LAYER", "NUMBA_THREADING_LAYER_PRIORITY",
+                        "GOMP_SPINCOUNT", "OMP_WAIT_POLICY")}
+    probe = ("import os, numba, numpy as np\n"
+             "import drake_tracker.core.jit.numba_threading\n"
+             "@numba.njit(parallel=True)\n"
+             "def f(x):\n"
+             "    return x.sum()\n"
+             "f(np.ones(4))\n"
+             "print(numba.threading_layer(), os.environ['GOMP_SPINCOUNT'])\n")
+    try:
+        import numba.np.ufunc.omppool  # noqa: F401
+    except ImportError:
+        pytest.skip("numba cannot load GNU OpenMP here")
+    out = subprocess.run([sys.executable, "-c", probe], env=env, check=True,
+                         capture_output=True, text=True).stdout.split()
+    assert out[-2:] == [LAYER_PRIORITY[0], DEFAULT_GOMP_SPINCOUNT]
 
 
 def test_policy_measures_both_then_uses_the_cheaper_and_reprobes(two_numba_threads):

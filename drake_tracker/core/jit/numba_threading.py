@@ -1,33 +1,36 @@
 """The one place where drake_tracker chooses numba's threading layer.
 
-Every module of the package that defines ``parallel=True`` kernels imports this module
-first, so the choice is made before any parallel kernel runs (numba fixes its threading
-layer at the first parallel launch).
+Every module of the package that defines parallel kernels imports this module first,
+so the choice is made before any parallel kernel runs (numba fixes its threading layer
+at the first parallel launch).
 
 Why: one image update makes about 60 parallel calls (one per CPF block and annealing
 layer, ~35 particles each, about 0.5 ms of work on one thread). What a layer costs to
 start and end such a call decides whether a second thread helps. Measured by
 ``drake-tracker bench`` on a 2-core Zen 4 VM (image updates/s, 1 thread -> 2 threads):
 
-* ``workqueue`` (ships with numba, the default here): forced onto two threads, 31 ->
-  23. Its workers sleep on a condition variable and are woken per call, about 0.2 ms a
-  call, so :class:`SerialOrParallel` keeps the sweep on one thread.
 * ``omp`` (GNU OpenMP) with ``GOMP_SPINCOUNT`` 10,000 (:data:`DEFAULT_GOMP_SPINCOUNT`):
   31 -> 41-48. The workers spin through the gap between two blocks (tens of
   microseconds), then sleep. With OpenMP's default spin (300,000 iterations), idle
   workers steal the core that the serial part of the sweep, or the Drake Simulator,
   needs.
+* ``workqueue`` (ships with numba): forced onto two threads, 31 -> 23. Its workers
+  sleep on a condition variable and are woken per call, about 0.2 ms a call, so
+  :class:`SerialOrParallel` keeps the sweep on one thread.
 
-``omp`` is not the default because GNU OpenMP is not fork-safe. A child forked from a
-process that has run a parallel kernel is terminated by numba at its first parallel
-launch ("fork() called from a process already using GNU OpenMP"), even with one
-thread, and ``multiprocessing`` forks by default on Linux. ``workqueue`` has no such
-limit. A user whose processes are spawned, not forked, can choose
-``NUMBA_THREADING_LAYER=omp`` for the second core; the spin is then bounded unless
-``GOMP_SPINCOUNT`` or ``OMP_WAIT_POLICY`` is set. Whatever the layer,
-:class:`SerialOrParallel` keeps a sweep on one thread while the parallel run is the
-dearer. ``workqueue`` must not be entered from two Python threads at once; the tracker
-runs its kernels from one thread.
+So the layer is chosen from :data:`LAYER_PRIORITY`: ``omp`` where numba can load it,
+else ``workqueue``. GNU OpenMP is not fork-safe: numba terminates a child forked from a
+process whose OpenMP threads have started at the child's first parallel launch, even
+with one thread, and ``multiprocessing`` forks by default on Linux. The package's
+kernels therefore run their serial compilations in such a child
+(:func:`parallel_allowed`); the child computes the same numbers on one core.
+
+The user's environment wins: ``NUMBA_THREADING_LAYER`` or
+``NUMBA_THREADING_LAYER_PRIORITY`` (e.g. ``workqueue`` for a program whose own parallel
+numba code runs in forked children), and ``GOMP_SPINCOUNT`` or ``OMP_WAIT_POLICY``.
+Whatever the layer, :class:`SerialOrParallel` keeps a sweep on one thread while the
+parallel run is the dearer. ``workqueue`` must not be entered from two Python threads
+at once; the tracker runs its kernels from one thread.
 """
 
 from __future__ import annotations
@@ -38,30 +41,58 @@ from collections.abc import Callable
 
 import numba
 
-#: The layer chosen when the user has not set ``NUMBA_THREADING_LAYER``.
-DEFAULT_THREADING_LAYER = "workqueue"
-#: GNU OpenMP's spin (iterations) before an idle worker sleeps, when the user chose
-#: ``omp`` and set no spin of their own.
+#: The layers numba tries, in order, when the user has named none.
+LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
+#: GNU OpenMP's spin (iterations) before an idle worker sleeps, unless the user set one.
 DEFAULT_GOMP_SPINCOUNT = "10000"
+#: Layers after whose start a forked child must not launch a parallel kernel.
+FORK_UNSAFE_LAYERS = frozenset({"omp", "tbb"})
 
 
 def configure_threading_layer() -> str:
-    """Selects :data:`DEFAULT_THREADING_LAYER` unless the user's environment names a
-    layer; for ``omp`` bounds OpenMP's spin (:data:`DEFAULT_GOMP_SPINCOUNT`) unless the
-    environment sets one. Returns the configured layer name (what numba will load at
-    its first parallel launch). Harmless once a layer is loaded: numba then keeps it."""
+    """Lets numba pick from :data:`LAYER_PRIORITY` unless the user's environment names a
+    layer or a priority, and bounds OpenMP's spin (:data:`DEFAULT_GOMP_SPINCOUNT`) unless
+    the environment sets one. Returns the configured layer name, ``default`` meaning
+    the first of the priority that loads (numba loads it at its first parallel launch).
+    Harmless once a layer is loaded: numba then keeps it."""
     requested = os.environ.get("NUMBA_THREADING_LAYER", "").strip()
+    if requested in ("", "default", "omp") and not (os.environ.get("GOMP_SPINCOUNT")
+                                                   or os.environ.get("OMP_WAIT_POLICY")):
+        os.environ["GOMP_SPINCOUNT"] = DEFAULT_GOMP_SPINCOUNT
     if requested:
-        if requested == "omp" and not (os.environ.get("GOMP_SPINCOUNT")
-                                       or os.environ.get("OMP_WAIT_POLICY")):
-            os.environ["GOMP_SPINCOUNT"] = DEFAULT_GOMP_SPINCOUNT
         return requested
-    if numba.config.THREADING_LAYER == "default":
-        numba.config.THREADING_LAYER = DEFAULT_THREADING_LAYER
+    if not os.environ.get("NUMBA_THREADING_LAYER_PRIORITY", "").strip():
+        numba.config.THREADING_LAYER_PRIORITY = list(LAYER_PRIORITY)
     return str(numba.config.THREADING_LAYER)
 
 
 configure_threading_layer()
+
+_forked_after_unsafe_start = False
+
+
+def _after_fork_in_child() -> None:
+    """In a forked child: remembers whether the parent had started a fork-unsafe layer."""
+    global _forked_after_unsafe_start
+    from numba.np.ufunc import parallel
+    if parallel._is_initialized and numba.threading_layer() in FORK_UNSAFE_LAYERS:
+        _forked_after_unsafe_start = True
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def parallel_allowed() -> bool:
+    """Whether the package may launch a parallel kernel here: numba has more than one
+    thread, and this process is not a fork of one whose fork-unsafe layer (GNU OpenMP)
+    had started (there the kernels run their serial compilations)."""
+    return not _forked_after_unsafe_start and numba.get_num_threads() > 1
+
+
+def pick_kernel(serial: Callable, parallel: Callable) -> Callable:
+    """``parallel`` where :func:`parallel_allowed`, else ``serial``: the two
+    compilations of :func:`serial_and_parallel`."""
+    return parallel if parallel_allowed() else serial
 
 
 class SerialOrParallel:
@@ -77,7 +108,8 @@ class SerialOrParallel:
     ``max_probe_every``); one that finds it cheaper, or a change of the choice, sets it
     back to ``probe_every``. (Measured: probing every 64th sweep made 2 threads 0.6-1 %
     slower than 1 on this machine, where the parallel sweep is the dearer.)
-    With one numba thread the serial version is always used.
+    With one numba thread, or in a forked child where a parallel launch is unsafe
+    (:func:`parallel_allowed`), the serial version is always used.
     """
 
     def __init__(self, probe_every: int = 64, smoothing: float = 0.3,
@@ -97,7 +129,7 @@ class SerialOrParallel:
 
     def use_parallel(self) -> bool:
         """Whether the next call should run the parallel compilation."""
-        if numba.get_num_threads() == 1:
+        if not parallel_allowed():
             return False
         self._calls += 1
         serial, parallel = self.cost_per_item[False], self.cost_per_item[True]

@@ -26,7 +26,7 @@ from functools import cached_property
 import numba
 import numpy as np
 
-import drake_tracker.core.jit.numba_threading  # noqa: F401  (threading layer before any kernel)
+from drake_tracker.core.jit.numba_threading import pick_kernel, serial_and_parallel
 
 #: The least uniform density w / Z_max (1/m) allowed: the image update's float32 mixture
 #: never falls below it, so its logarithm is that of a normal float32 number.
@@ -219,8 +219,7 @@ def coarser_observation(observation: PreparedObservation,
                    pixel_slot=slot, **per_pixel)
 
 
-@numba.njit(parallel=True, cache=True, nogil=True)
-def _sum_log_ratios(rendered, index, z, sigma, gauss_coeff, occ_coeff, log_p_occ_inf,
+def _sum_log_ratios_of(rendered, index, z, sigma, gauss_coeff, occ_coeff, log_p_occ_inf,
                     uniform, lam, occlusion, truncation):
     num = rendered.shape[0]
     out = np.zeros(num)
@@ -239,6 +238,9 @@ def _sum_log_ratios(rendered, index, z, sigma, gauss_coeff, occ_coeff, log_p_occ
             total += math.log((1.0 - occlusion) * p_vis + occlusion * p_occ) - log_p_occ_inf[p]
         out[n] = total
     return out
+
+
+_sum_serial, _sum_parallel = serial_and_parallel(_sum_log_ratios_of, nogil=True)
 
 
 def log_likelihoods(rendered: np.ndarray, observation: PreparedObservation,
@@ -265,7 +267,7 @@ def _score_rendered(rendered, observation: PreparedObservation, uniform: float,
     flat = rendered.reshape(rendered.shape[0], -1)
     if observation.num_valid == 0:
         return np.zeros(rendered.shape[0])
-    return _sum_log_ratios(
+    return pick_kernel(_sum_serial, _sum_parallel)(
         flat, observation.pixel_index, observation.z, observation.sigma,
         observation.gauss_coeff, observation.occ_coeff, observation.log_p_occ_inf,
         uniform, lam, occlusion, truncation)

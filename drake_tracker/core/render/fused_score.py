@@ -23,7 +23,11 @@ import numba
 import numpy as np
 from numba import prange
 
-from drake_tracker.core.jit.numba_threading import SerialOrParallel, serial_and_parallel
+from drake_tracker.core.jit.numba_threading import (
+    SerialOrParallel,
+    parallel_allowed,
+    serial_and_parallel,
+)
 from drake_tracker.core.likelihood.pixel_model import PreparedObservation
 from drake_tracker.core.simd.lane_kinematics import lane_relative_poses
 from drake_tracker.core.simd.lane_likelihood import PIXELS_PER_CALL
@@ -130,7 +134,7 @@ def fused_scores(q: np.ndarray, frame_tables: tuple, lane_tables: tuple,
     o = observation
     chunks = num_batch_chunks(N)
     if policy is None:
-        parallel = numba.get_num_threads() > 1
+        parallel = parallel_allowed()
     else:
         parallel = policy.use_parallel()
     if chunks == 1:

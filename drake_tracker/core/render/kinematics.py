@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit, prange
 from pydrake.multibody.tree import BodyIndex, JointIndex
 
-import drake_tracker.core.jit.numba_threading  # noqa: F401  (threading layer before any kernel)
+from drake_tracker.core.jit.numba_threading import pick_kernel, serial_and_parallel
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -137,8 +137,7 @@ def _body_poses_one(X, n, q, kind, inboard, outboard, q_index, axis, A, B, rev, 
         _step_pose(X, n, s, q, kind, inboard, outboard, q_index, axis, A, B, rev, T, M)
 
 
-@njit(parallel=True, cache=True, nogil=True)
-def _body_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev, out):
+def _body_poses_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev, out):
     for n in prange(q.shape[0]):
         T = np.empty((4, 4))
         M = np.empty((4, 4))
@@ -178,8 +177,7 @@ def relative_poses_one(n: int, q: np.ndarray, kind: np.ndarray, inboard: np.ndar
         Y[b, 3, 3] = 1.0
 
 
-@njit(parallel=True, cache=True, nogil=True)
-def _relative_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev,
+def _relative_poses_particles(q, kind, inboard, outboard, q_index, axis, A, B, rev,
                            frame_body, X_BF, out):
     """out[n, b] = inv(X_W_body(frame_body) @ X_BF) @ X_WB[n, b]."""
     nb = out.shape[1]
@@ -189,6 +187,12 @@ def _relative_poses_kernel(q, kind, inboard, outboard, q_index, axis, A, B, rev,
         X = np.empty((nb, 4, 4))
         relative_poses_one(n, q, kind, inboard, outboard, q_index, axis, A, B, rev,
                            frame_body, X_BF, X, out[n], T, M)
+
+
+_body_poses_serial, _body_poses_parallel = serial_and_parallel(_body_poses_particles,
+                                                               nogil=True)
+_relative_serial, _relative_parallel = serial_and_parallel(_relative_poses_particles,
+                                                           nogil=True)
 
 
 class BatchedKinematics:
@@ -319,7 +323,7 @@ class BatchedKinematics:
         q = np.ascontiguousarray(self._check_q(q))
         X = np.empty((q.shape[0], self._num_bodies, 4, 4))
         if q.shape[0]:
-            _body_poses_kernel(q, *self._tables(), X)
+            pick_kernel(_body_poses_serial, _body_poses_parallel)(q, *self._tables(), X)
         return X
 
     def frame_poses(self, q: np.ndarray, frame: Frame) -> np.ndarray:
@@ -344,5 +348,6 @@ class BatchedKinematics:
         out = np.empty((q.shape[0], self._num_bodies, 4, 4))
         if q.shape[0]:
             X_BF = np.ascontiguousarray(_to4(frame_A.GetFixedPoseInBodyFrame()))
-            _relative_poses_kernel(q, *self._tables(), int(frame_A.body().index()), X_BF, out)
+            pick_kernel(_relative_serial, _relative_parallel)(
+                q, *self._tables(), int(frame_A.body().index()), X_BF, out)
         return out

@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-import drake_tracker.core.jit.numba_threading  # noqa: F401  (threading layer before any kernel)
+from drake_tracker.core.jit.numba_threading import pick_kernel, serial_and_parallel
 
 
 @njit(cache=True, inline="always")
@@ -332,8 +332,7 @@ def render_particle(zbuf: np.ndarray, X: np.ndarray, vertices: np.ndarray,
                        rows, span)
 
 
-@njit(parallel=True, cache=True, nogil=True)
-def render_kernel(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
+def _render_particles(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
                   part_body: np.ndarray, part_vertex_start: np.ndarray,
                   part_tri_start: np.ndarray, sphere_center: np.ndarray,
                   sphere_radius: np.ndarray, tri_normal: np.ndarray, tri_offset: np.ndarray,
@@ -369,6 +368,24 @@ def render_kernel(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
                 for c in range(W):
                     iz = zbuf[r, c]
                     out[n, r, c] = np.float32(1.0 / iz) if iz > 0.0 else np.float32(np.inf)
+
+
+_render_serial, _render_parallel = serial_and_parallel(_render_particles, nogil=True)
+
+
+def render_kernel(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
+                  part_body: np.ndarray, part_vertex_start: np.ndarray,
+                  part_tri_start: np.ndarray, sphere_center: np.ndarray,
+                  sphere_radius: np.ndarray, tri_normal: np.ndarray, tri_offset: np.ndarray,
+                  tri_closed: np.ndarray, planes: np.ndarray, fx: float, fy: float,
+                  cx: float, cy: float, near: float, far: float, num_chunks: int,
+                  out: np.ndarray) -> None:
+    """Renders particle n's body poses ``X_CB[n]`` into ``out[n]`` (N, H, W) float32,
+    over numba's threads where :func:`~drake_tracker.core.jit.numba_threading.parallel_allowed`."""
+    pick_kernel(_render_serial, _render_parallel)(
+        X_CB, vertices, triangles, part_body, part_vertex_start, part_tri_start,
+        sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed, planes, fx, fy,
+        cx, cy, near, far, num_chunks, out)
 
 
 def num_chunks(n: int) -> int:
