@@ -87,7 +87,7 @@ def test_round_trip_gives_the_same_estimates(run, bag, apollo, tmp_path):
     assert (tmp_path / "bag" / "estimates.mcap").stat().st_size > 0
 
 
-def test_estimates_bag_holds_one_pose_and_joint_state_per_reading(run, bag, apollo, tmp_path):
+def test_estimates_bag_holds_one_message_per_topic_per_reading(run, bag, apollo, tmp_path):
     from rosbags.highlevel import AnyReader
 
     source = BagSource(bag, apollo.robot_joint_names)
@@ -97,8 +97,8 @@ def test_estimates_bag_holds_one_pose_and_joint_state_per_reading(run, bag, apol
         counts = {c.topic: c.msgcount for c in reader.connections}
         poses = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(
             connections=[c for c in reader.connections if c.topic == "/tracker/hand_pose"])]
-    assert counts == {"/tracker/hand_pose": len(table["t_s"]),
-                      "/tracker/joint_states": len(table["t_s"])}
+    topics = ("/tracker/hand_pose", "/tracker/joint_states", "/tf", "/tracker/health")
+    assert counts == dict.fromkeys(topics, len(table["t_s"]))
     last = poses[-1].pose.position
     np.testing.assert_allclose([last.x, last.y, last.z],
                                [table[c][-1] for c in ("x_m", "y_m", "z_m")], atol=1e-12)

@@ -12,6 +12,7 @@ pytest.importorskip("rosbags")
 
 from fast_params import small_params  # noqa: E402
 from test_cli import assert_one_line_error, run_cli  # noqa: E402
+from test_estimates_bag import offset_of, read_bag, transform_of  # noqa: E402
 
 from drake_tracker.io.bag_source import BagSource, BagTopics, CameraTopics  # noqa: E402
 from drake_tracker.io.estimates_out import read_estimates_csv  # noqa: E402
@@ -92,6 +93,14 @@ def test_tracking_the_bag_gives_the_estimates_of_the_run(recorded, capsys):
             continue
         np.testing.assert_allclose(b[column], a[column], rtol=0, atol=1e-9, err_msg=column)
     assert (a["health"] == b["health"]).all()
+    # estimates.mcap: each camera's offset on /tf, as estimates.csv has it.
+    tf = [m for _, m in read_bag(folder / "from_bag" / "estimates.mcap")["/tf"]]
+    assert len(tf) == len(b["t_s"])
+    assert [t.child_frame_id for t in tf[-1].transforms] == ["camera_estimated",
+                                                             "post_camera_estimated"]
+    for t, prefix in zip(tf[-1].transforms, ("camera_", "post_camera_")):
+        csv = [b[prefix + c][-1] for c in ("x_m", "y_m", "z_m", "rx_rad", "ry_rad", "rz_rad")]
+        np.testing.assert_allclose(offset_of(transform_of(t)), csv, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("flags, fragment", [

@@ -15,9 +15,21 @@
   ``NAME_rz_rad``.
 
 ``estimates.mcap`` (with the ``ros`` extra) carries the same estimates as ROS 2 messages
-so Foxglove or RViz can overlay them on the input: ``/tracker/hand_pose``
-(``geometry_msgs/msg/PoseStamped``, X_CE in the camera's frame) and
-``/tracker/joint_states`` (``sensor_msgs/msg/JointState``, the estimated angles).
+so Foxglove or RViz can overlay them on the input, one message per topic per estimate,
+all stamped with the row's ``t_s``:
+
+* ``/tracker/hand_pose`` (``geometry_msgs/msg/PoseStamped``): X_CE, the hand in the
+  first camera's estimated frame, its frame id the input's depth frame (that camera's);
+* ``/tracker/joint_states`` (``sensor_msgs/msg/JointState``): the estimated angles;
+* ``/tf`` (``tf2_msgs/msg/TFMessage``): each camera's estimated pose relative to its
+  nominal one, one ``TransformStamped`` per camera from the model's nominal frame of the
+  camera (``CameraMount.frame``, e.g. ``camera_optical``) to ``NAME_estimated``: the
+  transform of the camera's six offset values, ``camera_offset_transform``
+  (``robot/model.py``, the virtual joints' kinematics). The parent is the robot model's
+  frame name, which is the input's TF name of the camera only where the model was made
+  from the same description;
+* ``/tracker/health`` (``diagnostic_msgs/msg/DiagnosticArray``): the health (see
+  :func:`health_status`).
 """
 
 from __future__ import annotations
@@ -30,15 +42,27 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from drake_tracker.core.robustness.health import HealthState
+from drake_tracker.robot.model import camera_offset_transform
 
 if TYPE_CHECKING:
     from drake_tracker.core.filter.estimate import TrackerEstimate
+    from drake_tracker.core.robustness.health import TrackerHealth
     from drake_tracker.robot.model import TrackerModel
 
 #: The camera-offset columns, in the order of ``TrackerEstimate.camera_offset``.
 CAMERA_COLUMNS = ("camera_x_m", "camera_y_m", "camera_z_m", "camera_rx_rad",
                   "camera_ry_rad", "camera_rz_rad")
 POSE_COLUMNS = ("x_m", "y_m", "z_m", "qw", "qx", "qy", "qz")
+
+#: The bag's topics (see the module).
+HAND_POSE_TOPIC = "/tracker/hand_pose"
+JOINT_STATES_TOPIC = "/tracker/joint_states"
+TF_TOPIC = "/tf"
+HEALTH_TOPIC = "/tracker/health"
+#: ``DiagnosticStatus.name`` of the health.
+HEALTH_STATUS_NAME = "drake_tracker/health"
+#: ``DiagnosticStatus.level`` of each health state: OK, WARN, ERROR.
+HEALTH_LEVELS = {HealthState.TRACKING: 0, HealthState.UNCERTAIN: 1, HealthState.LOST: 2}
 
 
 def stamp_ns(base_ns: int, time_s: float) -> int:
@@ -61,6 +85,39 @@ def pose_values(X_CE: np.ndarray) -> list[float]:
     q = X.rotation().ToQuaternion().wxyz()
     q = -q if q[0] < 0 else q
     return [*X.translation(), *q]
+
+
+def estimated_frame(camera: str) -> str:
+    """The frame id of camera ``camera``'s estimated frame in the bag: ``NAME_estimated``."""
+    return f"{camera}_estimated"
+
+
+def camera_offset_values(offset: np.ndarray) -> list[float]:
+    """[x, y, z, qw, qx, qy, qz] of X_nominal_estimated for a camera's six offset values
+    [x, y, z, rx, ry, rz] (m, rad), composed as the virtual joints compose them."""
+    return pose_values(camera_offset_transform(offset))
+
+
+def health_status(health: TrackerHealth,
+                  base_ns: int = 0) -> tuple[int, str, list[tuple[str, str]]]:
+    """The health as a ``DiagnosticStatus``'s (level, message, key-value pairs).
+
+    Level: ``tracking`` OK, ``uncertain`` WARN, ``lost`` ERROR (``HEALTH_LEVELS``);
+    message: the state as ``estimates.csv`` writes it. Values: ``state``, ``acquired``
+    and ``restarts``, then, once an image was compared, the latest image's
+    ``image_stamp`` (exact decimal seconds in the input's time base), ``robot_pixels``,
+    ``agreement``, ``see_through`` and ``occluded`` (``ImageConsistency``; floats as
+    ``repr``, so they read back exactly)."""
+    state = HealthState(health.state)
+    values = [("state", state.name.lower()), ("acquired", str(bool(health.acquired))),
+              ("restarts", str(int(health.restarts)))]
+    latest = health.latest
+    if latest is not None:
+        values += [("image_stamp", stamp_text(base_ns, latest.time_s)),
+                   ("robot_pixels", str(int(latest.robot_pixels))),
+                   *((k, repr(float(getattr(latest, k))))
+                     for k in ("agreement", "see_through", "occluded"))]
+    return HEALTH_LEVELS[state], state.name.lower(), values
 
 
 class EstimatesCsv:
@@ -134,7 +191,15 @@ def _relative(text: str, base: str) -> float:
 
 class EstimatesBag:
     """Writes ``estimates.mcap``: the estimates as ROS 2 messages (see the module);
-    ``camera_frame`` names the frame of the hand pose (the input's depth frame id)."""
+    ``camera_frame`` names the frame of the hand pose (the input's depth frame id).
+
+    The health is a ``diagnostic_msgs/msg/DiagnosticArray`` because that is ROS's message
+    for a component's health: its level (OK, WARN, ERROR) is what rqt_robot_monitor,
+    Foxglove's diagnostics panels and diagnostic_aggregator show and filter on, and its
+    key-value pairs carry the figures behind the state, where a ``std_msgs/String``
+    would need a parser of its own. It is on ``/tracker/health``, not ``/diagnostics``:
+    it comes with every estimate, far above the usual rate of ``/diagnostics``, stamped
+    as the estimate; remap it there for the aggregator."""
 
     def __init__(self, path: str | Path, model: TrackerModel, base_ns: int = 0,
                  camera_frame: str = "camera") -> None:
@@ -146,13 +211,17 @@ class EstimatesBag:
         self.camera_frame = camera_frame
         self.names = list(model.robot_joint_names)
         self._robot = np.asarray(model.robot_joint_indices, int)
+        #: Each camera's (name, nominal frame, estimated frame), the first camera first.
+        self.cameras = [(name, model.camera(name).nominal_frame.name(),
+                         estimated_frame(name)) for name in model.camera_names]
         self._writer = bag_writer(path)
-        self._pose = self._writer.add_connection(
-            "/tracker/hand_pose", "geometry_msgs/msg/PoseStamped",
-            typestore=self.messages.store)
-        self._joints = self._writer.add_connection(
-            "/tracker/joint_states", "sensor_msgs/msg/JointState",
-            typestore=self.messages.store)
+        store = self.messages.store
+        self._pose, self._joints, self._tf, self._health = (
+            self._writer.add_connection(topic, kind, typestore=store) for topic, kind in (
+                (HAND_POSE_TOPIC, "geometry_msgs/msg/PoseStamped"),
+                (JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState"),
+                (TF_TOPIC, "tf2_msgs/msg/TFMessage"),
+                (HEALTH_TOPIC, "diagnostic_msgs/msg/DiagnosticArray")))
         self.rows = 0
 
     def write(self, estimate: TrackerEstimate) -> None:
@@ -161,8 +230,16 @@ class EstimatesBag:
         m = self.messages
         pose = m.pose_stamped(stamp, self.camera_frame, pose_values(estimate.X_CE))
         joints = m.joint_state(stamp, self.names, estimate.positions[self._robot])
-        self._writer.write(self._pose, stamp, m.serialize(pose))
-        self._writer.write(self._joints, stamp, m.serialize(joints))
+        first = self.cameras[0][0]
+        tf = m.tf_message([m.transform_stamped(
+            stamp, nominal, estimated, camera_offset_values(
+                estimate.camera_offset if name == first else estimate.camera_offsets[name]))
+            for name, nominal, estimated in self.cameras])
+        level, text, values = health_status(estimate.health, self.base_ns)
+        health = m.diagnostic_array(stamp, level, HEALTH_STATUS_NAME, text, values)
+        for connection, message in ((self._pose, pose), (self._joints, joints),
+                                    (self._tf, tf), (self._health, health)):
+            self._writer.write(connection, stamp, m.serialize(message))
         self.rows += 1
 
     def close(self) -> None:

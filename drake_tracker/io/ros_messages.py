@@ -1,8 +1,8 @@
 """ROS messages without a ROS install: the ``rosbags`` library (the ``ros`` extra).
 
 Builds and reads the few message types the tracker exchanges (``JointState``, depth
-``Image``, ``CameraInfo``, ``PoseStamped``) as ROS 2 (CDR) messages, and opens MCAP bags
-for writing. The extra's absence is one line that names it.
+``Image``, ``CameraInfo``, ``PoseStamped``, ``TFMessage``, ``DiagnosticArray``) as ROS 2
+(CDR) messages, and opens MCAP bags for writing. The extra's absence is one line that names it.
 """
 
 from __future__ import annotations
@@ -106,6 +106,36 @@ class RosMessages:
             orientation=t["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
         return t["geometry_msgs/msg/PoseStamped"](header=self.header(stamp_ns, frame_id),
                                                   pose=pose)
+
+    def transform_stamped(self, stamp_ns: int, parent: str, child: str,
+                          xyz_wxyz: list[float]) -> Any:
+        """A ``geometry_msgs/msg/TransformStamped``: the pose of frame ``child`` in frame
+        ``parent`` from [x, y, z, qw, qx, qy, qz]."""
+        t = self.types
+        x, y, z, qw, qx, qy, qz = (float(v) for v in xyz_wxyz)
+        transform = t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw))
+        return t["geometry_msgs/msg/TransformStamped"](
+            header=self.header(stamp_ns, parent), child_frame_id=child, transform=transform)
+
+    def tf_message(self, transforms: list[Any]) -> Any:
+        """A ``tf2_msgs/msg/TFMessage`` of ``TransformStamped`` messages."""
+        return self.types["tf2_msgs/msg/TFMessage"](transforms=list(transforms))
+
+    def diagnostic_array(self, stamp_ns: int, level: int, name: str, message: str,
+                         values: list[tuple[str, str]], hardware_id: str = "") -> Any:
+        """A ``diagnostic_msgs/msg/DiagnosticArray`` of one ``DiagnosticStatus``:
+        ``level`` (``DiagnosticStatus.OK``, ``WARN``, ``ERROR``, ``STALE``: 0-3), and
+        ``values`` as its key-value pairs."""
+        t = self.types
+        pairs = [t["diagnostic_msgs/msg/KeyValue"](key=str(k), value=str(v))
+                 for k, v in values]
+        status = t["diagnostic_msgs/msg/DiagnosticStatus"](
+            level=int(level), name=name, message=message, hardware_id=hardware_id,
+            values=pairs)
+        return t["diagnostic_msgs/msg/DiagnosticArray"](header=self.header(stamp_ns, ""),
+                                                        status=[status])
 
     def depth_image(self, stamp_ns: int, frame_id: str, depth: np.ndarray) -> Any:
         """A depth ``sensor_msgs/msg/Image``: ``32FC1`` for float metres (NaN: no return),
