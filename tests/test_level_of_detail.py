@@ -116,3 +116,20 @@ def test_bad_level_of_detail_is_rejected():
     LevelOfDetail(max_disagreement=None, finest_cell_px=9.0)  # one cell: no ladder
     assert list(LevelOfDetail().ladder_m(FULL.subsampled(8))) == [3.0, 2.0, 1.333333,
                                                                   0.888889, 0.592593]
+
+
+def test_the_cad_robots_temporary_folder_is_removed_at_exit():
+    """hires_apollo_model's default folder lives as long as the process, not longer (the
+    bench and the tests build it in every run: 47 folders had piled up in /tmp)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    probe = ("from drake_tracker.robot.hires import hires_apollo_model\n"
+             "m = hires_apollo_model(segments=8, fillet_steps=1)\n"
+             "print(m.config.model_file)\n")
+    out = subprocess.run([sys.executable, "-c", probe], check=True, capture_output=True,
+                         text=True).stdout.split()
+    sdf = Path(out[-1])
+    assert sdf.name.endswith(".sdf") and "apollo_hires_" in str(sdf)
+    assert not sdf.parent.exists()

@@ -8,7 +8,9 @@ temporary one by default), so no large mesh files are shipped.
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -23,9 +25,11 @@ SMALL_TESSELLATION = {"segments": 48, "fillet_steps": 3}
 def hires_apollo_model(folder: str | Path | None = None, segments: int = 96,
                        fillet_steps: int = 5) -> TrackerModel:
     """The tracker model of Apollo with CAD-like OBJ meshes written into ``folder``
-    (default: a new temporary folder, kept for the life of the process)."""
+    (default: a new temporary folder, kept for the life of the process and removed at its
+    exit)."""
     if folder is None:
         folder = tempfile.mkdtemp(prefix="apollo_hires_")
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
     sdf = write_apollo_hires(Path(folder), segments=segments, fillet_steps=fillet_steps)
     config = dataclasses.replace(robot_preset("apollo"), model_file=str(sdf))
     return build_tracker_model(config)
