@@ -16,11 +16,17 @@ import pytest
 pytest.importorskip("rosbags")
 
 from fast_params import small_params as fast_params  # noqa: E402
+from test_estimates_bag import (  # noqa: E402
+    drake_hand_in_nominal,
+    hand_under_tf,
+    positions_from_csv,
+    read_bag,
+)
 
 from drake_tracker.io.bag_source import BagSource, BagTopics  # noqa: E402
 from drake_tracker.io.estimates_out import read_estimates_csv, stamp_text  # noqa: E402
 from drake_tracker.io.ros_messages import RosMessages, bag_writer, depth_from_image  # noqa: E402
-from drake_tracker.io.run_bag import DEFAULT_BASE_NS, write_run_bag  # noqa: E402
+from drake_tracker.io.run_bag import CAMERA_FRAME, DEFAULT_BASE_NS, write_run_bag  # noqa: E402
 from drake_tracker.io.synthetic import synthetic_run  # noqa: E402
 from drake_tracker.io.track_files import track_bag, track_run  # noqa: E402
 
@@ -85,6 +91,13 @@ def test_round_trip_gives_the_same_estimates(run, bag, apollo, tmp_path):
     report = json.loads((tmp_path / "bag" / "report.json").read_text())
     assert report["methods"]["full_fusion"]["translation_mm"]["p50"] < 30.0
     assert (tmp_path / "bag" / "estimates.mcap").stat().st_size > 0
+    # /tf hangs the camera from the input's frame: the bag's depth frame id; a recorded
+    # run has none, so the model's frame name.
+    for folder, parent in (("bag", CAMERA_FRAME),
+                           ("run", apollo.cameras[0].nominal_frame.name())):
+        tf = read_bag(tmp_path / folder / "estimates.mcap")["/tf"]
+        assert {(t.header.frame_id, t.child_frame_id) for _, m in tf
+                for t in m.transforms} == {(parent, "camera_estimated")}, folder
 
 
 def test_estimates_bag_holds_one_message_per_topic_per_reading(run, bag, apollo, tmp_path):
@@ -102,6 +115,42 @@ def test_estimates_bag_holds_one_message_per_topic_per_reading(run, bag, apollo,
     last = poses[-1].pose.position
     np.testing.assert_allclose([last.x, last.y, last.z],
                                [table[c][-1] for c in ("x_m", "y_m", "z_m")], atol=1e-12)
+    # The hand pose under /tf from the bag's camera frame is the hand in the nominal
+    # camera frame, by Drake's kinematics at the estimated angles and camera offset.
+    tf = [m for _, m in read_bag(tmp_path / "estimates.mcap")["/tf"]]
+    assert {p.header.frame_id for p in poses} == {"camera_estimated"}
+    for row, (pose, transforms) in enumerate(zip(poses, tf, strict=True)):
+        parent, X = hand_under_tf(pose, transforms)
+        assert parent == CAMERA_FRAME
+        np.testing.assert_allclose(
+            X, drake_hand_in_nominal(apollo, positions_from_csv(apollo, table, row)),
+            rtol=0, atol=1e-9, err_msg=f"row {row}")
+
+
+@pytest.mark.parametrize("frame", ["cam", ""])
+def test_a_camera_without_a_frame_id_hangs_from_the_model_frame(apollo, tmp_path, frame):
+    """The bag's camera frame id (its CameraInfo's) is its /tf parent in the estimates;
+    a bag without one gives the model's frame name."""
+    m = RosMessages()
+    names = apollo.robot_joint_names
+    t0 = DEFAULT_BASE_NS
+    messages = [("/info", "sensor_msgs/msg/CameraInfo", t0,
+                 m.camera_info(t0, frame, 8, 6, 10.0, 10.0, 4.0, 3.0)),
+                ("/depth", "sensor_msgs/msg/Image", t0 + 5_000_000,
+                 m.depth_image(t0, frame, np.ones((6, 8), np.float32)))]
+    messages += [("/joint_states", "sensor_msgs/msg/JointState", t,
+                  m.joint_state(t, names, np.zeros(len(names))))
+                 for t in (t0 + k * 10_000_000 for k in range(3))]
+    path = _write(tmp_path / "bag.mcap", sorted(messages, key=lambda x: x[2]))
+    source = BagSource(path, names)
+    assert source.frame_ids("camera") == ({"camera": "cam"} if frame else {})
+    track_bag(source, apollo, fast_params(), tmp_path / "out", progress=False)
+    topics = read_bag(tmp_path / "out" / "estimates.mcap")
+    parent = frame or apollo.cameras[0].nominal_frame.name()
+    assert [[(t.header.frame_id, t.child_frame_id) for t in tf.transforms]
+            for _, tf in topics["/tf"]] == [[(parent, "camera_estimated")]] * 3
+    assert {p.header.frame_id for _, p in topics["/tracker/hand_pose"]} == {
+        "camera_estimated"}
 
 
 def _write(path, messages):

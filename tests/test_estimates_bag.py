@@ -1,7 +1,10 @@
 """``estimates.mcap`` read back with rosbags (``io/estimates_out.EstimatesBag``): each
 camera's offset from its nominal mount on ``/tf`` (the six values back to float
-precision, the transform as Drake's kinematics of the virtual joints give it), the
-health on ``/tracker/health``, for one camera and for two."""
+precision, the transform as Drake's kinematics of the virtual joints give it), hung
+from the input's frame id of the camera (the model's frame name without one), the hand
+pose in the first camera's estimated frame, so that the two composed are the hand in
+the input's (nominal) camera frame as Drake's kinematics give it at the estimated
+positions, and the health on ``/tracker/health``, for one camera and for two."""
 
 from __future__ import annotations
 
@@ -14,19 +17,26 @@ from pydrake.common.eigen_geometry import Quaternion  # noqa: E402
 from pydrake.math import RigidTransform  # noqa: E402
 from test_multicamera import two_camera_config  # noqa: E402
 
-from drake_tracker.core.filter.estimate import TrackerEstimate  # noqa: E402
+from drake_tracker.core.filter.estimate import (  # noqa: E402
+    PoseReadout,
+    TrackerEstimate,
+    estimate_from_belief,
+)
+from drake_tracker.core.filter.kalman import MEAN_A, VAR_A, VAR_B  # noqa: E402
 from drake_tracker.core.robustness.health import (  # noqa: E402
     HealthState,
     ImageConsistency,
     TrackerHealth,
 )
 from drake_tracker.io.estimates_out import (  # noqa: E402
+    CAMERA_COLUMNS,
     HAND_POSE_TOPIC,
     HEALTH_STATUS_NAME,
     HEALTH_TOPIC,
     JOINT_STATES_TOPIC,
     TF_TOPIC,
     EstimatesBag,
+    camera_tf_frames,
     stamp_ns,
     stamp_text,
 )
@@ -41,6 +51,10 @@ HEALTHS = (
                   restarts=2),
 )
 LEVELS = {HealthState.TRACKING: 0, HealthState.UNCERTAIN: 1, HealthState.LOST: 2}
+#: The input's frame ids of the cameras (as a ``record --bag`` bag names them), and the
+#: model's nominal frames, which differ from them.
+FRAME_IDS = {"camera": "camera_depth_optical_frame", "post": "post_depth_optical_frame"}
+NOMINAL = {"camera": "camera_optical", "post": "post_nominal"}
 
 
 @pytest.fixture(scope="module")
@@ -91,6 +105,41 @@ def transform_of(message):
     return RigidTransform(Quaternion([r.w, r.x, r.y, r.z]), [p.x, p.y, p.z]).GetAsMatrix4()
 
 
+def pose_of(message):
+    """The 4x4 pose of a ``PoseStamped`` in its frame."""
+    o, p = message.pose.orientation, message.pose.position
+    return RigidTransform(Quaternion([o.w, o.x, o.y, o.z]), [p.x, p.y, p.z]).GetAsMatrix4()
+
+
+def hand_under_tf(pose, tf):
+    """(parent, X_parent_hand): a ``/tracker/hand_pose`` message composed with the
+    ``/tf`` transform whose child is the pose's frame (one there must be)."""
+    [t] = [t for t in tf.transforms if t.child_frame_id == pose.header.frame_id]
+    return t.header.frame_id, transform_of(t) @ pose_of(pose)
+
+
+def drake_hand_in_nominal(model, q):
+    """X_nominal_hand of the model's first camera at positions ``q``, by Drake."""
+    context = model.plant.CreateDefaultContext()
+    model.plant.SetPositions(context, q)
+    return model.plant.CalcRelativeTransform(context, model.cameras[0].nominal_frame,
+                                             model.end_effector_frame).GetAsMatrix4()
+
+
+def positions_from_csv(model, table, row):
+    """Every joint's estimated position (robot angles and camera offsets) in row ``row``
+    of ``read_estimates_csv``'s columns."""
+    q = np.zeros(model.num_joints)
+    prismatic = set(model.prismatic_joint_names)
+    for k, name in zip(model.robot_joint_indices, model.robot_joint_names):
+        q[k] = table[f"angle_{name}_{'m' if name in prismatic else 'rad'}"][row]
+    for i, name in enumerate(model.camera_names):
+        columns = CAMERA_COLUMNS if i == 0 else [name + c.removeprefix("camera")
+                                                 for c in CAMERA_COLUMNS]
+        q[model.camera_joint_indices(name)] = [table[c][row] for c in columns]
+    return q
+
+
 def offset_of(X):
     """[x, y, z, rx, ry, rz] of X = p(x, y, z) Rx(rx) Ry(ry) Rz(rz) (|ry| < pi/2)."""
     R = X[:3, :3]
@@ -117,7 +166,8 @@ def test_each_cameras_offset_and_the_health_read_back(cameras, apollo, two_camer
                                                       tmp_path):
     model = apollo if cameras == "one" else two_cameras
     written = estimates(model)
-    bag = EstimatesBag(tmp_path / "estimates.mcap", model, BASE_NS, "depth_optical")
+    frame_ids = {name: FRAME_IDS[name] for name in model.camera_names}
+    bag = EstimatesBag(tmp_path / "estimates.mcap", model, BASE_NS, frame_ids)
     for estimate in written:
         bag.write(estimate)
     bag.close()
@@ -127,13 +177,13 @@ def test_each_cameras_offset_and_the_health_read_back(cameras, apollo, two_camer
     stamps = [stamp_ns(BASE_NS, e.time_s) for e in written]
     for topic, messages in topics.items():
         assert [t for t, _ in messages] == stamps, topic
-    # The hand pose keeps the input's depth frame.
-    assert {m.header.frame_id for _, m in topics[HAND_POSE_TOPIC]} == {"depth_optical"}
+    # The hand pose is in the first camera's estimated frame, its child on /tf.
+    assert {m.header.frame_id for _, m in topics[HAND_POSE_TOPIC]} == {"camera_estimated"}
 
-    nominal = {"camera": "camera_optical", "post": "post_nominal"}
     for estimate, stamp, (_, tf) in zip(written, stamps, topics[TF_TOPIC]):
+        # Each camera hangs from the input's frame id of it.
         assert [(t.header.frame_id, t.child_frame_id) for t in tf.transforms] == [
-            (nominal[name], f"{name}_estimated") for name in model.camera_names]
+            (FRAME_IDS[name], f"{name}_estimated") for name in model.camera_names]
         for name, t in zip(model.camera_names, tf.transforms):
             assert t.header.stamp.sec * 10**9 + t.header.stamp.nanosec == stamp
             X = transform_of(t)
@@ -165,3 +215,70 @@ def test_each_cameras_offset_and_the_health_read_back(cameras, apollo, two_camer
         assert {k: float(v) for k, v in values.items()} == {
             "agreement": latest.agreement, "see_through": latest.see_through,
             "occluded": latest.occluded}
+
+
+@pytest.mark.parametrize("cameras", ["one", "two"])
+def test_the_hand_pose_under_tf_is_the_hand_in_the_input_camera_frame(
+        cameras, apollo, two_cameras, tmp_path):
+    """Estimates as the tracker makes them (``estimate_from_belief``: X_CE by the
+    package's kinematics at the mean angles), with camera offsets of 5 cm and 0.25 rad:
+    the hand pose composed with /tf from the input's camera frame is the hand in the
+    nominal camera frame by Drake's kinematics at the same angles; the hand pose alone
+    (what the bag said before, labelled with the input's frame) is off by the offset."""
+    model = apollo if cameras == "one" else two_cameras
+    readout = PoseReadout(model)
+    rng = np.random.default_rng(11)
+    written = []
+    for k in range(4):
+        belief = np.zeros((5, model.num_joints))
+        belief[MEAN_A] = rng.normal(0.0, 0.3, model.num_joints)
+        for name in model.camera_names:
+            belief[MEAN_A, model.camera_joint_indices(name)] = rng.normal(
+                0.0, [0.05] * 3 + [0.25] * 3)
+        belief[VAR_A] = belief[VAR_B] = 1.0
+        written.append(estimate_from_belief(model, readout, 0.1 * k, belief))
+    frame_ids = {name: FRAME_IDS[name] for name in model.camera_names}
+    bag = EstimatesBag(tmp_path / "estimates.mcap", model, BASE_NS, frame_ids)
+    for estimate in written:
+        bag.write(estimate)
+    bag.close()
+    topics = read_bag(tmp_path / "estimates.mcap")
+    for estimate, (_, pose), (_, tf) in zip(written, topics[HAND_POSE_TOPIC],
+                                            topics[TF_TOPIC], strict=True):
+        parent, X = hand_under_tf(pose, tf)
+        assert parent == FRAME_IDS[model.camera_names[0]]
+        expected = drake_hand_in_nominal(model, estimate.positions)
+        np.testing.assert_allclose(X, expected, rtol=0, atol=1e-9)
+        assert np.linalg.norm(pose_of(pose)[:3, 3] - expected[:3, 3]) > 1e-3
+
+
+def test_without_frame_ids_the_cameras_hang_from_the_model_frames(two_cameras, tmp_path):
+    model = two_cameras
+    assert camera_tf_frames(model) == [("camera", NOMINAL["camera"], "camera_estimated"),
+                                       ("post", NOMINAL["post"], "post_estimated")]
+    # A camera left out keeps the model's frame; the others take the input's.
+    partial = {"post": FRAME_IDS["post"]}
+    assert [p for _, p, _ in camera_tf_frames(model, partial)] == [NOMINAL["camera"],
+                                                                    FRAME_IDS["post"]]
+    bag = EstimatesBag(tmp_path / "estimates.mcap", model, BASE_NS)
+    for estimate in estimates(model, count=1):
+        bag.write(estimate)
+    bag.close()
+    topics = read_bag(tmp_path / "estimates.mcap")
+    [(_, tf)], [(_, pose)] = topics[TF_TOPIC], topics[HAND_POSE_TOPIC]
+    assert [(t.header.frame_id, t.child_frame_id) for t in tf.transforms] == [
+        (NOMINAL["camera"], "camera_estimated"), (NOMINAL["post"], "post_estimated")]
+    assert pose.header.frame_id == "camera_estimated"
+
+
+@pytest.mark.parametrize("frame_ids, error, fragment", [
+    ("camera_depth_optical_frame", TypeError, "by camera name"),
+    ({"side": "side_frame"}, ValueError, "unknown camera 'side'"),
+    ({"post": ""}, ValueError, "camera 'post': frame id ''"),
+    ({"camera": "post_estimated"}, ValueError, "an estimated frame's name"),
+])
+def test_bad_frame_ids_are_named_before_the_bag_is_made(two_cameras, tmp_path, frame_ids,
+                                                        error, fragment):
+    with pytest.raises(error, match=fragment):
+        EstimatesBag(tmp_path / "estimates.mcap", two_cameras, BASE_NS, frame_ids)
+    assert not list(tmp_path.iterdir())

@@ -12,7 +12,14 @@ pytest.importorskip("rosbags")
 
 from fast_params import small_params  # noqa: E402
 from test_cli import assert_one_line_error, run_cli  # noqa: E402
-from test_estimates_bag import offset_of, read_bag, transform_of  # noqa: E402
+from test_estimates_bag import (  # noqa: E402
+    drake_hand_in_nominal,
+    hand_under_tf,
+    offset_of,
+    positions_from_csv,
+    read_bag,
+    transform_of,
+)
 
 from drake_tracker.io.bag_source import BagSource, BagTopics, CameraTopics  # noqa: E402
 from drake_tracker.io.estimates_out import read_estimates_csv  # noqa: E402
@@ -93,14 +100,34 @@ def test_tracking_the_bag_gives_the_estimates_of_the_run(recorded, capsys):
             continue
         np.testing.assert_allclose(b[column], a[column], rtol=0, atol=1e-9, err_msg=column)
     assert (a["health"] == b["health"]).all()
-    # estimates.mcap: each camera's offset on /tf, as estimates.csv has it.
-    tf = [m for _, m in read_bag(folder / "from_bag" / "estimates.mcap")["/tf"]]
+    # estimates.mcap: each camera's offset on /tf, as estimates.csv has it, from the
+    # bag's frame id of the camera (a recorded run has none: the model's frame names).
+    topics = read_bag(folder / "from_bag" / "estimates.mcap")
+    tf = [m for _, m in topics["/tf"]]
     assert len(tf) == len(b["t_s"])
-    assert [t.child_frame_id for t in tf[-1].transforms] == ["camera_estimated",
-                                                             "post_camera_estimated"]
+    frames = [("camera_depth_optical_frame", "camera_estimated"),
+              ("post_camera_depth_optical_frame", "post_camera_estimated")]
+    assert {tuple((t.header.frame_id, t.child_frame_id) for t in m.transforms)
+            for m in tf} == {tuple(frames)}
+    model = model_for_run(run)
+    nominal = [(c.nominal_frame.name(), child) for c, (_, child) in zip(model.cameras,
+                                                                         frames)]
+    assert nominal != frames
+    assert [(t.header.frame_id, t.child_frame_id) for t in read_bag(
+        folder / "from_run" / "estimates.mcap")["/tf"][-1][1].transforms] == nominal
     for t, prefix in zip(tf[-1].transforms, ("camera_", "post_camera_")):
         csv = [b[prefix + c][-1] for c in ("x_m", "y_m", "z_m", "rx_rad", "ry_rad", "rz_rad")]
         np.testing.assert_allclose(offset_of(transform_of(t)), csv, rtol=0, atol=1e-12)
+    # The hand pose, in the first camera's estimated frame, under /tf: the hand in the
+    # bag's first camera frame as Drake's kinematics put it at the estimated positions.
+    poses = [m for _, m in topics["/tracker/hand_pose"]]
+    assert {p.header.frame_id for p in poses} == {"camera_estimated"}
+    for row in (0, len(poses) // 2, len(poses) - 1):
+        parent, X = hand_under_tf(poses[row], tf[row])
+        assert parent == "camera_depth_optical_frame"
+        np.testing.assert_allclose(
+            X, drake_hand_in_nominal(model, positions_from_csv(model, b, row)),
+            rtol=0, atol=1e-9, err_msg=f"row {row}")
 
 
 @pytest.mark.parametrize("flags, fragment", [

@@ -18,6 +18,9 @@ MCAP storage) or a single ``.mcap`` file, read with ``rosbags`` (the ``ros`` ext
 * Several depth cameras (``BagTopics.cameras``: each a camera of the model by name, its
   depth topic and its CameraInfo topic): each camera's images are named by it
   (``ImageEvent.camera``), numbered on their own, with the camera's own intrinsics.
+* Each camera's frame id (its CameraInfo's ``header.frame_id``) is where the tracker's
+  ``estimates.mcap`` hangs that camera's estimated frame on ``/tf``
+  (:meth:`BagSource.frame_ids`, ``io/estimates_out.py``).
 """
 
 from __future__ import annotations
@@ -73,7 +76,8 @@ class BagTopics:
 
 @dataclass(frozen=True)
 class BagCamera:
-    """A depth camera read from a bag: its topics, intrinsics and frame id."""
+    """A depth camera read from a bag: its topics, intrinsics and frame id (its
+    CameraInfo's ``header.frame_id``; empty where the bag gives none)."""
 
     #: The model's camera (None: the bag's one camera, read without a name).
     name: str | None
@@ -226,7 +230,15 @@ class BagSource:
         if info is None:
             raise ValueError(f"bag {self.path}: no CameraInfo message on {info_topic}")
         return BagCamera(name, depth_topic, info_topic, intrinsics_from_camera_info(info),
-                         str(info.header.frame_id) or (name or "camera"))
+                         str(info.header.frame_id))
+
+    def frame_ids(self, first_camera: str) -> dict[str, str]:
+        """Each camera's frame id in the bag by the model's camera name, for
+        ``EstimatesBag(camera_frames=...)``: the bag's one camera, read without a name,
+        is ``first_camera`` (the model's first camera, the one it is tracked as); a
+        camera whose CameraInfo has no frame id is left out (the model's frame name
+        stands for it)."""
+        return {c.name or first_camera: c.frame for c in self.cameras if c.frame}
 
     def _first(self, topic: str) -> Any:
         connections = [c for c in self.reader.connections if c.topic == topic]

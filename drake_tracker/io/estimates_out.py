@@ -19,22 +19,41 @@ so Foxglove or RViz can overlay them on the input, one message per topic per est
 all stamped with the row's ``t_s``:
 
 * ``/tracker/hand_pose`` (``geometry_msgs/msg/PoseStamped``): X_CE, the hand in the
-  first camera's estimated frame, its frame id the input's depth frame (that camera's);
+  first camera's estimated frame, its frame id that frame's: the first camera's child
+  on ``/tf`` (``NAME_estimated``);
 * ``/tracker/joint_states`` (``sensor_msgs/msg/JointState``): the estimated angles;
 * ``/tf`` (``tf2_msgs/msg/TFMessage``): each camera's estimated pose relative to its
-  nominal one, one ``TransformStamped`` per camera from the model's nominal frame of the
-  camera (``CameraMount.frame``, e.g. ``camera_optical``) to ``NAME_estimated``: the
+  nominal one, one ``TransformStamped`` per camera from the input's frame id of the
+  camera (a bag's depth frame, e.g. ``camera_depth_optical_frame``; for an input
+  without frame ids, a recorded run or an LCM log, the model's nominal frame of the
+  camera, ``CameraMount.frame``, e.g. ``camera_optical``) to ``NAME_estimated``: the
   transform of the camera's six offset values, ``camera_offset_transform``
-  (``robot/model.py``, the virtual joints' kinematics). The parent is the robot model's
-  frame name, which is the input's TF name of the camera only where the model was made
-  from the same description;
+  (``robot/model.py``, the virtual joints' kinematics);
 * ``/tracker/health`` (``diagnostic_msgs/msg/DiagnosticArray``): the health (see
   :func:`health_status`).
+
+The input's frame of a camera stands for the camera's nominal mount: where the input's
+own TF tree (from the robot's description) puts the camera, which is what the model's
+nominal frame is. So ``/tf`` hangs each estimated frame under the input's camera frame,
+and the hand pose composed with it is the hand where the tracker puts it in the input's
+camera frame: ``X_nominal_estimated * X_CE``. The estimated frames are named by the
+model's camera names, not the frame ids: they are unique in a model (two cameras whose
+input frame ids coincide still get frames of their own), match ``estimates.csv``'s
+``NAME_`` columns and the tracker's ``camera_offsets[NAME]``, and stay the same
+whatever the input, so a Foxglove or RViz layout that shows ``camera_estimated`` works
+for every input.
+
+Earlier bags stamped the hand pose with the input's depth frame id, while X_CE is in
+the estimated frame (off by the camera offset, millimetres to centimetres), and hung
+``/tf`` from the model's frame names, which need not be the input's, so the tree did
+not connect to the input's frames. The pose's values are unchanged; only its frame id
+and ``/tf``'s parents changed.
 """
 
 from __future__ import annotations
 
 import csv
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -90,6 +109,30 @@ def pose_values(X_CE: np.ndarray) -> list[float]:
 def estimated_frame(camera: str) -> str:
     """The frame id of camera ``camera``'s estimated frame in the bag: ``NAME_estimated``."""
     return f"{camera}_estimated"
+
+
+def camera_tf_frames(model: TrackerModel, frame_ids: Mapping[str, str] | None = None
+                     ) -> list[tuple[str, str, str]]:
+    """Each camera's (name, ``/tf`` parent, ``/tf`` child) in the bag, the model's first
+    camera first: the parent is the input's frame id of the camera (``frame_ids``, by
+    the model's camera name), or the model's nominal frame name of a camera it lacks;
+    the child is ``NAME_estimated`` (see the module).
+
+    Raises TypeError for a single frame id (a str: name its camera), ValueError for a
+    camera the model does not have, or a frame id that is empty or ``NAME_estimated``."""
+    if isinstance(frame_ids, str):
+        raise TypeError(f"frame ids are by camera name, e.g. "
+                        f"{{'{model.camera_names[0]}': '{frame_ids}'}}, not a str")
+    frame_ids = dict(frame_ids or {})
+    children = {estimated_frame(name) for name in model.camera_names}
+    for name, frame in frame_ids.items():
+        model.camera(name)  # ValueError naming the model's cameras
+        if not frame or frame in children:
+            raise ValueError(f"camera '{name}': frame id '{frame}' cannot be a /tf parent "
+                             f"(empty, or an estimated frame's name); leave the camera out "
+                             f"for the model's frame name")
+    return [(name, frame_ids.get(name, model.camera(name).nominal_frame.name()),
+             estimated_frame(name)) for name in model.camera_names]
 
 
 def camera_offset_values(offset: np.ndarray) -> list[float]:
@@ -190,8 +233,14 @@ def _relative(text: str, base: str) -> float:
 
 
 class EstimatesBag:
-    """Writes ``estimates.mcap``: the estimates as ROS 2 messages (see the module);
-    ``camera_frame`` names the frame of the hand pose (the input's depth frame id).
+    """Writes ``estimates.mcap``: the estimates as ROS 2 messages (see the module).
+
+    ``camera_frames``: the input's frame id of each camera, by the model's camera name
+    (a bag's depth frame ids); each is that camera's parent on ``/tf``, and a camera
+    left out (or all, with None: an input without frame ids) hangs from the model's
+    nominal frame name (:func:`camera_tf_frames`). The hand pose's frame id is the first
+    camera's estimated frame, ``hand_frame``. (This replaces ``camera_frame``, the one
+    frame id the hand pose was stamped with.)
 
     The health is a ``diagnostic_msgs/msg/DiagnosticArray`` because that is ROS's message
     for a component's health: its level (OK, WARN, ERROR) is what rqt_robot_monitor,
@@ -202,18 +251,18 @@ class EstimatesBag:
     as the estimate; remap it there for the aggregator."""
 
     def __init__(self, path: str | Path, model: TrackerModel, base_ns: int = 0,
-                 camera_frame: str = "camera") -> None:
+                 camera_frames: Mapping[str, str] | None = None) -> None:
         from drake_tracker.io.ros_messages import RosMessages, bag_writer
 
         self.path = Path(path)
         self.messages = RosMessages()
         self.base_ns = int(base_ns)
-        self.camera_frame = camera_frame
         self.names = list(model.robot_joint_names)
         self._robot = np.asarray(model.robot_joint_indices, int)
-        #: Each camera's (name, nominal frame, estimated frame), the first camera first.
-        self.cameras = [(name, model.camera(name).nominal_frame.name(),
-                         estimated_frame(name)) for name in model.camera_names]
+        #: Each camera's (name, /tf parent, /tf child), the first camera first.
+        self.cameras = camera_tf_frames(model, camera_frames)
+        #: The hand pose's frame id: the first camera's estimated frame.
+        self.hand_frame = self.cameras[0][2]
         self._writer = bag_writer(path)
         store = self.messages.store
         self._pose, self._joints, self._tf, self._health = (
@@ -228,13 +277,13 @@ class EstimatesBag:
         """The estimate after a reading, as one message on each topic."""
         stamp = stamp_ns(self.base_ns, estimate.time_s)
         m = self.messages
-        pose = m.pose_stamped(stamp, self.camera_frame, pose_values(estimate.X_CE))
+        pose = m.pose_stamped(stamp, self.hand_frame, pose_values(estimate.X_CE))
         joints = m.joint_state(stamp, self.names, estimate.positions[self._robot])
         first = self.cameras[0][0]
         tf = m.tf_message([m.transform_stamped(
-            stamp, nominal, estimated, camera_offset_values(
+            stamp, parent, child, camera_offset_values(
                 estimate.camera_offset if name == first else estimate.camera_offsets[name]))
-            for name, nominal, estimated in self.cameras])
+            for name, parent, child in self.cameras])
         level, text, values = health_status(estimate.health, self.base_ns)
         health = m.diagnostic_array(stamp, level, HEALTH_STATUS_NAME, text, values)
         for connection, message in ((self._pose, pose), (self._joints, joints),

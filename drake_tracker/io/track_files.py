@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -106,13 +106,17 @@ def track_to_folder(events: Iterable[Event], model: TrackerModel,
                     camera: CameraIntrinsics | dict[str, CameraIntrinsics],
                     params: TrackerParams | None,
                     out_dir: str | Path | None, base_ns: int = 0,
-                    camera_frame: str = "camera", truth: Truth | None = None,
+                    camera_frames: Mapping[str, str] | None = None,
+                    truth: Truth | None = None,
                     total_images: int | None = None, source: dict | None = None,
                     progress: bool = True) -> dict:
     """Tracks ``events`` and writes ``estimates.csv``, ``estimates.mcap`` (when the
     ``ros`` extra is installed) and ``report.json`` into ``out_dir`` (None: nothing is
     written); returns the report. ``camera``: the one camera's intrinsics, or several
-    cameras' by name (``Tracker(cameras=...)``; the events name their camera)."""
+    cameras' by name (``Tracker(cameras=...)``; the events name their camera).
+    ``camera_frames``: the input's frame id of each camera by name, the cameras' parents
+    on ``estimates.mcap``'s ``/tf`` (``EstimatesBag``; None, or a camera left out: the
+    model's frame name)."""
     tracker = (Tracker(model, params=params, cameras=camera) if isinstance(camera, dict)
                else Tracker(model, camera, params))
     sinks = []
@@ -120,7 +124,7 @@ def track_to_folder(events: Iterable[Event], model: TrackerModel,
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         sinks.append(EstimatesCsv(out / "estimates.csv", model, base_ns))
-        bag = _estimates_bag(out / "estimates.mcap", model, base_ns, camera_frame)
+        bag = _estimates_bag(out / "estimates.mcap", model, base_ns, camera_frames)
         sinks.append(bag)
     sampler = TruthSampler(truth.times_s) if truth is not None else None
     sink = EstimateSinks(*sinks, sampler)
@@ -140,13 +144,14 @@ def track_to_folder(events: Iterable[Event], model: TrackerModel,
     return report
 
 
-def _estimates_bag(path: Path, model: TrackerModel, base_ns: int, camera_frame: str):
+def _estimates_bag(path: Path, model: TrackerModel, base_ns: int,
+                   camera_frames: Mapping[str, str] | None):
     try:
         from drake_tracker.io.estimates_out import EstimatesBag
 
         if path.exists():
             path.unlink()
-        return EstimatesBag(path, model, base_ns, camera_frame)
+        return EstimatesBag(path, model, base_ns, camera_frames)
     except ImportError as err:
         log.warning("estimates.mcap not written: %s", err)
         return None
@@ -168,12 +173,15 @@ def print_report(report: dict) -> None:
 def track_bag(source: BagSource, model: TrackerModel, params: TrackerParams | None,
               out_dir: str | Path | None, progress: bool = True) -> dict:
     """Tracks an open ``io/bag_source.BagSource`` into ``out_dir`` (see
-    :func:`track_to_folder`); the bag's truth topic, if any, gives error percentiles."""
+    :func:`track_to_folder`); the bag's truth topic, if any, gives error percentiles,
+    and each camera's frame id in the bag is its parent on ``estimates.mcap``'s
+    ``/tf``."""
     truth = source.truth_X_CE()
     try:
         return track_to_folder(
             source.events(), model, source.camera_models(), params, out_dir, source.base_ns,
-            source.camera_frame, Truth(*truth) if truth is not None else None,
+            source.frame_ids(model.camera_names[0]),
+            Truth(*truth) if truth is not None else None,
             source.num_images, {"bag": str(source.path), "joint_topic": source.joint_topic,
                                 "depth_topic": source.depth_topic,
                                 "camera_info_topic": source.camera_info_topic,
