@@ -373,19 +373,9 @@ def _render_particles(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndar
 _render_serial, _render_parallel = serial_and_parallel(_render_particles, nogil=True)
 
 
-def render_kernel(X_CB: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
-                  part_body: np.ndarray, part_vertex_start: np.ndarray,
-                  part_tri_start: np.ndarray, sphere_center: np.ndarray,
-                  sphere_radius: np.ndarray, tri_normal: np.ndarray, tri_offset: np.ndarray,
-                  tri_closed: np.ndarray, planes: np.ndarray, fx: float, fy: float,
-                  cx: float, cy: float, near: float, far: float, num_chunks: int,
-                  out: np.ndarray) -> None:
-    """Renders particle n's body poses ``X_CB[n]`` into ``out[n]`` (N, H, W) float32,
-    over numba's threads where :func:`~drake_tracker.core.jit.numba_threading.parallel_allowed`."""
-    pick_kernel(_render_serial, _render_parallel)(
-        X_CB, vertices, triangles, part_body, part_vertex_start, part_tri_start,
-        sphere_center, sphere_radius, tri_normal, tri_offset, tri_closed, planes, fx, fy,
-        cx, cy, near, far, num_chunks, out)
+def render_kernel(*args: object) -> None:
+    """:func:`_render_particles` (same arguments), threaded where ``parallel_allowed()``."""
+    pick_kernel(_render_serial, _render_parallel)(*args)
 
 
 def num_chunks(n: int) -> int:
