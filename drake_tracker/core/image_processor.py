@@ -45,6 +45,7 @@ from drake_tracker.core.robustness.health import (
     restart_due,
     shows_no_arm,
 )
+from drake_tracker.core.robustness.innovation import Innovation, image_innovation
 from drake_tracker.core.robustness.jump_visibility import jump_testable
 from drake_tracker.core.robustness.second_opinion import EncoderSearch
 from drake_tracker.core.sensors.camera import CameraIntrinsics
@@ -84,6 +85,8 @@ class ImageOutcome:
     skip_reason: str = ""
     #: The challenger belief after this image (``core/robustness/second_opinion.py``).
     challenger: Challenger | None = None
+    #: The joint filter's innovation of ``observation`` (``core/robustness/innovation.py``).
+    innovation: Innovation | None = None
 
 
 class ImageProcessor:
@@ -105,6 +108,9 @@ class ImageProcessor:
         #: Whether the model has other cameras, which may hold the arm while this one
         #: does not see it (``observe``: such an image is not applied).
         self.several_cameras = len(model.cameras) > 1
+        #: The robot joints (n,): those whose innovations test the filter's consistency.
+        self._robot = np.zeros(model.num_joints, bool)
+        self._robot[np.asarray(model.robot_joint_indices, int)] = True
         if camera_name is not None:
             self.camera_index = model.camera_names.index(model.camera(camera_name).name)
             model = model.for_camera(camera_name)
@@ -242,7 +248,8 @@ class ImageProcessor:
         if restarted:
             observation = replace(observation, restart=restart)
         return ImageOutcome(observation, result, predicted, restarted, misplaced,
-                            challenger=challenger)
+                            challenger=challenger,
+                            innovation=image_innovation(prior, observation, self._robot))
 
     def _out_of_view_reason(self, predicted: ImageConsistency) -> str:
         """Why an image of one of several cameras that shows fewer than

@@ -142,7 +142,7 @@ def conclude_image(outcome: ImageOutcome, health: TrackerHealth,
         return ImageVerdict(None, health, "no valid depth pixel",
                             "images without a valid pixel")
     after = next_health(health, outcome.consistency, params, outcome.restarted,
-                        outcome.misplaced, outcome.challenger)
+                        outcome.misplaced, outcome.challenger, outcome.innovation)
     observation = outcome.observation
     if not confirms_tracking(health, after):
         observation = replace(observation, informs_bias_noise=False)

@@ -39,6 +39,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drake_tracker.core.likelihood.pixel_model import LikelihoodParams, pixel_sigma, valid_pixels
+from drake_tracker.core.robustness.innovation import (
+    Innovation,
+    innovations_consistent,
+    with_innovation,
+)
 
 #: Depth behind the estimated robot that counts as seeing through it, besides 3σ (m).
 SEE_THROUGH_MARGIN_M = 0.02
@@ -235,6 +240,8 @@ class TrackerHealth:
     left_view: bool = False
     #: The challenger belief, while one searches or rests (``core/robustness/second_opinion.py``).
     challenger: Challenger | None = None
+    #: The latest applied images' innovations (``core/robustness/innovation.py``).
+    innovations: tuple[Innovation, ...] = ()
 
 
 def is_consistent(image: ImageConsistency, params: HealthParams) -> bool:
@@ -315,12 +322,15 @@ def restart_due(health: TrackerHealth, time_s: float, params: HealthParams) -> b
 
 def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthParams,
                 restarted: bool = False, misplaced: bool = False,
-                challenger: Challenger | None = None) -> TrackerHealth:
+                challenger: Challenger | None = None,
+                innovation: Innovation | None = None) -> TrackerHealth:
     """The health after one more image (a pure function, so the Drake system can keep
     its state in the Context); ``restarted``: the belief was restarted from the encoders
     before this image's update (``image`` then compares it with the restarted belief),
     which forgets that the arm was acquired; ``misplaced``: see ``is_misplaced``;
-    ``challenger``: the challenger belief after this image."""
+    ``challenger``: the challenger belief after this image; ``innovation``: the joint
+    filter's innovation of this image's observation (``innovation.image_innovation``;
+    None: the image was not applied, and the state comes from its pixels alone)."""
     if restarted:
         health = replace(health, confirmed_s=-float("inf"), disagreeing_in_a_row=0,
                          restarts=health.restarts + 1)
@@ -352,5 +362,13 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
         # state does not depend on it (an internal TRACKING has at least two agreeing
         # images in a row).
         state = HealthState.UNCERTAIN
+    innovations = health.innovations
+    if innovation is not None:
+        innovations = with_innovation(innovations, innovation)
+        if state == HealthState.TRACKING and not innovations_consistent(innovations):
+            # The images agree with the estimate, but the filter's innovations are larger
+            # than its model allows (a bias stepping or drifting faster than its model,
+            # a wrong mode being followed): reported only, like the case above.
+            state = HealthState.UNCERTAIN
     return TrackerHealth(state, image, bad, good, confirmed, acquired, health.restarts, since,
-                         left_view, challenger)
+                         left_view, challenger, innovations)
