@@ -131,7 +131,7 @@ def test_the_default_prefers_openmp():
 
 
 def test_policy_measures_both_then_uses_the_cheaper_and_reprobes(two_numba_threads):
-    policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0)
+    policy = SerialOrParallel(probe_every=4, window=1, warmup_calls=0)
     assert policy.use_parallel() is False  # nothing measured: serial first
     policy.record(False, 1.0, 10)
     assert policy.use_parallel() is True  # then parallel, once
@@ -142,8 +142,25 @@ def test_policy_measures_both_then_uses_the_cheaper_and_reprobes(two_numba_threa
     assert [policy.use_parallel() for _ in range(3)].count(True) >= 2
 
 
+def test_one_slowed_call_does_not_flip_the_choice(two_numba_threads):
+    """A call can only be slowed by the machine: one preempted parallel call among fast
+    ones leaves the policy on the parallel kernel; a lasting slow-down does not."""
+    policy = SerialOrParallel(probe_every=1000, window=5, warmup_calls=0)
+    policy.use_parallel()
+    policy.record(False, 1.5, 10)
+    for _ in range(5):
+        assert policy.use_parallel()
+        policy.record(True, 1.0, 10)
+    assert policy.use_parallel()
+    policy.record(True, 3.0, 10)  # preempted once
+    assert policy.use_parallel() and policy.cost_per_item[True] == 0.1
+    for _ in range(5):  # the machine stays loaded: the slow calls fill the window
+        policy.record(True, 3.0, 10)
+    assert not policy.use_parallel()
+
+
 def test_the_first_call_of_each_compilation_is_not_measured(two_numba_threads):
-    policy = SerialOrParallel(smoothing=1.0, warmup_calls=1)
+    policy = SerialOrParallel(window=1, warmup_calls=1)
     assert policy.use_parallel() is False
     policy.record(False, 5.0, 10)  # compiles / loads: not measured
     assert policy.use_parallel() is False and policy.cost_per_item[False] is None
@@ -254,7 +271,7 @@ def test_the_scoring_kernels_have_cache_files_of_their_own():
 
 
 def test_probes_that_confirm_the_choice_come_ever_more_rarely(two_numba_threads):
-    policy = SerialOrParallel(probe_every=4, smoothing=1.0, warmup_calls=0,
+    policy = SerialOrParallel(probe_every=4, window=1, warmup_calls=0,
                               max_probe_every=16)
     policy.use_parallel()
     policy.record(False, 1.0, 10)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import os
 import types
+from collections import deque
 from collections.abc import Callable
 
 import numba
@@ -102,7 +103,12 @@ class SerialOrParallel:
     Even a non-spinning layer must wake its workers at each parallel call; on a loaded
     machine that wake-up can cost more than the work of a CPF block (measured: 2 threads
     3x slower than 1 at a load average of 25 on 2 cores). The parallel version is used
-    while it is the cheaper of the two (exponential moving averages of seconds per item);
+    while it is the cheaper of the two, each's cost the least seconds per item of its
+    latest ``window`` calls: a call can only be slowed by the machine (another process,
+    a preempted worker), so the least is the robust figure. (With an exponential average
+    instead, one preempted parallel sweep of 17.6 against 9-13 µs per evaluation kept the
+    bench's two threads on the serial kernel for 16 updates, and two threads measured
+    1.24x one thread in one bench run of five, 1.59-1.62x in the others.)
     every ``probe_interval``-th call tries the other one, so a change of load is followed.
     A probe that finds the other one still dearer doubles the interval (up to
     ``max_probe_every``); one that finds it cheaper, or a change of the choice, sets it
@@ -112,7 +118,7 @@ class SerialOrParallel:
     (:func:`parallel_allowed`), the serial version is always used.
     """
 
-    def __init__(self, probe_every: int = 64, smoothing: float = 0.3,
+    def __init__(self, probe_every: int = 64, window: int = 5,
                  warmup_calls: int = 1, max_probe_every: int = 4096):
         """``warmup_calls``: the first calls of each compilation are not measured (they
         include loading the code and starting the threads: milliseconds, which made the
@@ -121,7 +127,9 @@ class SerialOrParallel:
         self.probe_every = int(probe_every)
         self.max_probe_every = max(int(max_probe_every), self.probe_every)
         self.probe_interval = self.probe_every
-        self.smoothing = float(smoothing)
+        self.window = max(1, int(window))
+        self._recent: dict[bool, deque[float]] = {b: deque(maxlen=self.window)
+                                                   for b in (False, True)}
         self.warmup_calls = int(warmup_calls)
         self.cost_per_item: dict[bool, float | None] = {False: None, True: None}
         self._calls = 0
@@ -150,9 +158,8 @@ class SerialOrParallel:
             return
         cost = seconds / max(1, items)
         before = self._parallel_is_faster()
-        old = self.cost_per_item[parallel]
-        self.cost_per_item[parallel] = cost if old is None else (
-            (1.0 - self.smoothing) * old + self.smoothing * cost)
+        self._recent[parallel].append(cost)
+        self.cost_per_item[parallel] = min(self._recent[parallel])
         after = self._parallel_is_faster()
         if before is None or after is None:
             return
