@@ -3,15 +3,38 @@ bag path can be tried end to end without a robot.
 
 Topics: ``/joint_states`` (``sensor_msgs/msg/JointState``), ``/camera/depth/image_raw``
 (``32FC1``, metres, NaN: no return), ``/camera/depth/camera_info`` (one per image), and
-the truth: ``/truth/hand_pose`` (``geometry_msgs/msg/PoseStamped``, X_CE in the true
-camera frame) and ``/truth/joint_states`` (the true angles). Header stamps are the run's
-times plus ``base_ns`` (a Unix time: real bags' stamps are); each message is logged at
-its stamp, an image at its arrival.
+the truth:
+
+* ``/truth/hand_pose`` (``geometry_msgs/msg/PoseStamped``): X_CE, the hand in the first
+  camera's true frame, its frame id that frame's: the first camera's child on ``/tf``
+  (``NAME_true``);
+* ``/truth/joint_states`` (``sensor_msgs/msg/JointState``): the true angles;
+* ``/tf`` (``tf2_msgs/msg/TFMessage``): each camera's true pose relative to its nominal
+  one (the mounting error), one message per truth sample holding one
+  ``TransformStamped`` per camera, the first camera first, from the camera's depth
+  frame id in this bag (:func:`camera_topics`) to ``NAME_true``: the transform of the
+  run's six true offset values of the camera (``truth_camera_offset``),
+  ``camera_offset_transform`` (``robot/model.py``). A camera without them (none, not
+  one row of six per truth sample, or not finite) is an error before the bag is made.
+
+Header stamps are the run's times plus ``base_ns`` (a Unix time: real bags' stamps
+are); each message is logged at its stamp, an image at its arrival.
+
+The depth frame id stands for the camera's nominal mount, as in the tracker's
+``estimates.mcap`` (``io/estimates_out.py``), which hangs ``NAME_estimated`` from the
+input's frame id of the camera: tracking this bag puts ``camera_estimated`` beside
+``camera_true`` under ``camera_depth_optical_frame``, and ``/tracker/hand_pose`` and
+``/truth/hand_pose`` composed with ``/tf`` are both the hand in that frame. The true
+frames are named by the run's camera names (unique in a run, and whatever the frame
+ids), as the estimated frames are by the model's. Earlier bags stamped the truth pose
+with the depth frame id, off by the mounting error, and had no ``/tf``; the pose's
+values are unchanged.
 
 A run of several cameras (``RecordedRun.other_cameras``) writes each further camera
 ``NAME``'s images on ``/NAME/depth/image_raw`` and ``/NAME/depth/camera_info``
 (:func:`camera_topics`; frame ``NAME_depth_optical_frame``); ``track --bag`` takes them
-back with ``--depth-topic NAME=TOPIC``.
+back with ``--depth-topic NAME=TOPIC``. ``track --bag`` reads only the JointState,
+Image and CameraInfo topics outside ``/truth/``, so ``/tf`` does not reach the tracker.
 """
 
 from __future__ import annotations
@@ -24,7 +47,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_tracker.io.bag_source import TRUTH_POSE_TOPIC
-from drake_tracker.io.estimates_out import pose_values, stamp_ns
+from drake_tracker.io.estimates_out import (
+    TF_TOPIC,
+    camera_offset_values,
+    pose_values,
+    stamp_ns,
+)
 from drake_tracker.io.ros_messages import RosMessages, bag_writer
 
 if TYPE_CHECKING:
@@ -49,15 +77,54 @@ def camera_topics(run: RecordedRun) -> dict[str, tuple[str, str, str]]:
     return topics
 
 
+def true_frame(camera: str) -> str:
+    """The frame id of camera ``camera``'s true frame in a written bag: ``NAME_true``."""
+    return f"{camera}_true"
+
+
+def truth_tf_frames(run: RecordedRun) -> list[tuple[str, str, str, np.ndarray]]:
+    """Each camera's (name, ``/tf`` parent, ``/tf`` child, (T, 6) true offsets) in a
+    written bag, the first camera first: the parent is the camera's depth frame id
+    (:func:`camera_topics`), the child ``NAME_true`` (see the module).
+
+    Raises ValueError naming a camera whose true offsets are missing: none, not one row
+    of six values per truth sample, or a value that is not finite."""
+    frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
+    offsets = {run.camera_name: run.truth_camera_offset}
+    offsets.update({c.name: c.truth_camera_offset for c in run.other_cameras})
+    expected = (len(run.truth_times_s), 6)
+    out = []
+    for name, frame in frames.items():
+        values = offsets[name]
+        shape = None if values is None else np.shape(values)
+        if shape != expected:
+            raise ValueError(f"camera '{name}': its true camera offset is missing "
+                             f"(truth_camera_offset of shape {shape}, expected "
+                             f"{expected}: six values per truth sample), so the bag "
+                             f"cannot place its true frame '{true_frame(name)}' on /tf")
+        values = np.asarray(values, float)
+        bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
+        if bad.size:
+            raise ValueError(f"camera '{name}': its true camera offset at truth sample "
+                             f"{int(bad[0])} is not finite ({values[bad[0]].tolist()}), "
+                             f"so the bag cannot place its true frame "
+                             f"'{true_frame(name)}' on /tf")
+        out.append((name, frame, true_frame(name), values))
+    return out
+
+
 def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BASE_NS
                   ) -> int:
     """Writes ``run`` to the MCAP file ``path`` (see the module); returns the number of
-    messages written."""
+    messages written. Raises ValueError (before making the file) for a camera without
+    its true offsets (:func:`truth_tf_frames`)."""
+    frames = truth_tf_frames(run)
     m = RosMessages()
     writer = bag_writer(path)
     try:
         topics = {
             "joints": ("/joint_states", "sensor_msgs/msg/JointState"),
+            "tf": (TF_TOPIC, "tf2_msgs/msg/TFMessage"),
             "truth_pose": (TRUTH_POSE_TOPIC, "geometry_msgs/msg/PoseStamped"),
             "truth_joints": ("/truth/joint_states", "sensor_msgs/msg/JointState"),
         }
@@ -67,7 +134,7 @@ def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BAS
         connections = {k: writer.add_connection(topic, kind, typestore=m.store)
                        for k, (topic, kind) in topics.items()}
         count = 0
-        for log_ns, key, message in _messages(run, m, base_ns):
+        for log_ns, key, message in _messages(run, m, base_ns, frames):
             writer.write(connections[key], log_ns, m.serialize(message))
             count += 1
     finally:
@@ -75,8 +142,10 @@ def write_run_bag(run: RecordedRun, path: str | Path, base_ns: int = DEFAULT_BAS
     return count
 
 
-def _messages(run: RecordedRun, m: RosMessages, base_ns: int) -> Iterator[tuple]:
-    """(log time ns, topic key, message) in log order, built one at a time."""
+def _messages(run: RecordedRun, m: RosMessages, base_ns: int,
+              true_frames: list[tuple[str, str, str, np.ndarray]]) -> Iterator[tuple]:
+    """(log time ns, topic key, message) in log order, built one at a time;
+    ``true_frames``: :func:`truth_tf_frames`. At a truth stamp, ``/tf`` comes first."""
     names = list(run.joint_names)
 
     def readings():
@@ -95,12 +164,21 @@ def _messages(run: RecordedRun, m: RosMessages, base_ns: int) -> Iterator[tuple]
             yield arrival, 2, ("depth", name), lambda s=stamp, i=i: m.depth_image(
                 s, frame, np.asarray(depth_images[i], np.float32))
 
+    hand_frame = true_frames[0][2]
+
+    def tf(stamp, k):
+        return m.tf_message([m.transform_stamped(stamp, parent, child,
+                                                 camera_offset_values(offsets[k]))
+                             for _, parent, child, offsets in true_frames])
+
     def truth():
-        for t, X, q in zip(run.truth_times_s, run.truth_X_CE, run.truth_positions_rad):
+        for k, (t, X, q) in enumerate(zip(run.truth_times_s, run.truth_X_CE,
+                                          run.truth_positions_rad)):
             stamp = stamp_ns(base_ns, t)
-            yield stamp, 3, "truth_pose", lambda s=stamp, X=X: m.pose_stamped(
-                s, CAMERA_FRAME, pose_values(X))
-            yield stamp, 4, "truth_joints", lambda s=stamp, q=q: m.joint_state(s, names, q)
+            yield stamp, 3, "tf", lambda s=stamp, k=k: tf(s, k)
+            yield stamp, 4, "truth_pose", lambda s=stamp, X=X: m.pose_stamped(
+                s, hand_frame, pose_values(X))
+            yield stamp, 5, "truth_joints", lambda s=stamp, q=q: m.joint_state(s, names, q)
 
     frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
     cameras = [images(run.camera_name, run.camera_intrinsics, run.image_capture_times_s,
