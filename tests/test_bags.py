@@ -4,13 +4,11 @@ The round trip: a run written as a ROS 2 MCAP bag and tracked from the bag gives
 same estimates as the run tracked directly (the estimates file, to 1e-9; here exactly).
 Bad input: each fault named, or skipped and counted. Bags written by rosbags' own
 writers for the other two formats (a ROS 1 bag, a ROS 2 sqlite3 folder) read the same.
-The truth's hand pose is in the camera's true frame, which ``/tf`` hangs from the bag's
-depth frame by the true camera offset.
+The truth's hand pose and ``/tf``: ``tests/test_bag_truth.py``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 
 import numpy as np
@@ -22,23 +20,14 @@ from fast_params import small_params as fast_params  # noqa: E402
 from test_estimates_bag import (  # noqa: E402
     drake_hand_in_nominal,
     hand_under_tf,
-    offset_of,
-    pose_of,
     positions_from_csv,
     read_bag,
-    transform_of,
 )
 
-from drake_tracker.core.filter.estimate import PoseReadout  # noqa: E402
 from drake_tracker.io.bag_source import BagSource, BagTopics  # noqa: E402
 from drake_tracker.io.estimates_out import read_estimates_csv, stamp_text  # noqa: E402
 from drake_tracker.io.ros_messages import RosMessages, bag_writer, depth_from_image  # noqa: E402
-from drake_tracker.io.run_bag import (  # noqa: E402
-    CAMERA_FRAME,
-    DEFAULT_BASE_NS,
-    truth_tf_frames,
-    write_run_bag,
-)
+from drake_tracker.io.run_bag import CAMERA_FRAME, DEFAULT_BASE_NS, write_run_bag  # noqa: E402
 from drake_tracker.io.synthetic import synthetic_run  # noqa: E402
 from drake_tracker.io.track_files import track_bag, track_run  # noqa: E402
 
@@ -82,88 +71,6 @@ def test_the_bag_holds_the_run(run, bag, apollo):
     times, X = source.truth_X_CE()
     np.testing.assert_allclose(X, run.truth_X_CE, atol=1e-12)
     source.close()
-
-
-def truth_positions(model, run, k, offsets):
-    """Every joint of ``model`` at truth sample ``k``: the run's true angles, and each
-    camera's virtual joints at its true offset (``offsets``: by camera name)."""
-    q = np.zeros(model.num_joints)
-    q[model.robot_joint_indices] = [run.truth_positions_rad[k, run.joint_names.index(n)]
-                                    for n in model.robot_joint_names]
-    for name, values in offsets.items():
-        q[model.camera_joint_indices(name)] = values[k]
-    return q
-
-
-def check_truth_under_tf(model, run, path, frames):
-    """The bag's ``/tf`` and ``/truth/hand_pose`` against the run: one TFMessage per truth
-    sample holding one transform per camera (``frames``: [(name, parent, child)]), each
-    the camera's true offset; the hand pose in the first camera's true frame, stamped and
-    logged as its ``/tf``, and under it the hand in the nominal camera frame by Drake's
-    kinematics at the true angles (independent of the offset); the pose alone is off by
-    the offset. Returns the messages read."""
-    topics = read_bag(path)
-    tf, poses = topics["/tf"], topics["/truth/hand_pose"]
-    T = len(run.truth_times_s)
-    assert len(tf) == len(poses) == T
-    assert {p.header.frame_id for _, p in poses} == {frames[0][2]}
-    offsets = {run.camera_name: run.truth_camera_offset}
-    offsets.update({c.name: c.truth_camera_offset for c in run.other_cameras})
-    for k, ((tf_log, message), (pose_log, pose)) in enumerate(zip(tf, poses, strict=True)):
-        stamp = DEFAULT_BASE_NS + round(run.truth_times_s[k] * 1e9)
-        assert tf_log == pose_log == stamp
-        assert pose.header.stamp.sec * 10**9 + pose.header.stamp.nanosec == stamp
-        assert [(t.header.frame_id, t.child_frame_id) for t in message.transforms] == [
-            (parent, child) for _, parent, child in frames]
-        for (name, _, _), t in zip(frames, message.transforms):
-            assert t.header.stamp.sec * 10**9 + t.header.stamp.nanosec == stamp
-            np.testing.assert_allclose(offset_of(transform_of(t)), offsets[name][k],
-                                       rtol=0, atol=1e-12, err_msg=f"{name} at {k}")
-        parent, X = hand_under_tf(pose, message)
-        assert parent == frames[0][1]
-        expected = drake_hand_in_nominal(model, truth_positions(model, run, k, offsets))
-        np.testing.assert_allclose(X, expected, rtol=0, atol=1e-9, err_msg=f"sample {k}")
-        assert np.linalg.norm(pose_of(pose)[:3, 3] - expected[:3, 3]) > 1e-3
-    return topics
-
-
-def test_the_truth_hand_pose_is_in_the_true_camera_frame(run, bag, apollo, tmp_path):
-    """The run's constant offset (1 cm, 1 deg), then an offset that changes at every
-    truth sample (a few cm and degrees, X_CE recomputed): /tf carries each sample's."""
-    frames = [("camera", CAMERA_FRAME, "camera_true")]
-    assert [f[:3] for f in truth_tf_frames(run)] == frames
-    topics = check_truth_under_tf(apollo, run, bag, frames)
-    assert sorted(topics) == sorted(
-        ["/joint_states", "/camera/depth/image_raw", "/camera/depth/camera_info", "/tf",
-         "/truth/hand_pose", "/truth/joint_states"])
-
-    rng = np.random.default_rng(3)
-    T = len(run.truth_times_s)
-    offset = rng.normal(0.0, [0.03] * 3 + [0.05] * 3, (T, 6))
-    q = np.stack([truth_positions(apollo, run, k, {"camera": offset}) for k in range(T)])
-    varying = dataclasses.replace(run, truth_camera_offset=offset,
-                                  truth_X_CE=PoseReadout(apollo).poses(q)[0])
-    write_run_bag(varying, tmp_path / "varying.mcap")
-    check_truth_under_tf(apollo, varying, tmp_path / "varying.mcap", frames)
-
-
-@pytest.mark.parametrize("offset, fragment", [
-    (np.zeros((0, 6)), r"camera 'camera': its true camera offset is missing .*shape "
-                       r"\(0, 6\)"),
-    (None, r"camera 'camera': its true camera offset is missing .*shape None"),
-    ("nan", r"camera 'camera': its true camera offset at truth sample 2 is not finite"),
-])
-def test_a_missing_true_offset_is_named_before_the_bag_is_made(run, tmp_path, offset,
-                                                               fragment):
-    broken = dataclasses.replace(run)
-    if isinstance(offset, str):
-        broken.truth_camera_offset = run.truth_camera_offset.copy()
-        broken.truth_camera_offset[2, 4] = np.nan
-    else:
-        broken.truth_camera_offset = offset  # past validate(), as a hand-made run can be
-    with pytest.raises(ValueError, match=fragment):
-        write_run_bag(broken, tmp_path / "broken.mcap")
-    assert not list(tmp_path.iterdir())
 
 
 def test_round_trip_gives_the_same_estimates(run, bag, apollo, tmp_path):

@@ -1,8 +1,10 @@
 """Bags of several depth cameras (issue 46): ``record --bag`` writes each camera's
 images on its own topics, ``track --bag`` takes each as a camera of the model
 (``--depth-topic NAME=TOPIC``), and the round trip gives the estimates of
-``track --run`` on the same run; bad camera topics are one-line errors."""
+``track --run`` on the same run; bad camera topics are one-line errors. Each camera's
+true frame hangs on ``/tf`` from its depth frame, the truth's hand pose in the first's."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -11,6 +13,7 @@ import pytest
 pytest.importorskip("rosbags")
 
 from fast_params import small_params  # noqa: E402
+from test_bag_truth import check_truth_under_tf  # noqa: E402
 from test_cli import assert_one_line_error, run_cli  # noqa: E402
 from test_estimates_bag import (  # noqa: E402
     drake_hand_in_nominal,
@@ -26,6 +29,7 @@ from drake_tracker.io.estimates_out import read_estimates_csv  # noqa: E402
 from drake_tracker.io.replay import model_for_run  # noqa: E402
 from drake_tracker.io.run_bag import write_run_bag  # noqa: E402
 from drake_tracker.params.loading import tracker_params_to_yaml  # noqa: E402
+from drake_tracker.robot.model import camera_offset_transform  # noqa: E402
 
 DEPTH = ["--depth-topic", "camera=/camera/depth/image_raw",
          "--depth-topic", "post_camera=/post_camera/depth/image_raw"]
@@ -70,6 +74,37 @@ def test_each_camera_has_its_own_topics_in_the_bag(recorded):
         assert [e.sequence for e in mine] == list(range(len(capture)))
         np.testing.assert_array_equal([e.capture_s for e in mine], capture)
         np.testing.assert_array_equal(np.stack([e.depth for e in mine]), depth)
+
+
+def test_each_cameras_true_frame_is_on_tf(recorded):
+    """/tf: per truth sample, each camera's true offset from its depth frame in the bag
+    to ``NAME_true``; /truth/hand_pose in ``camera_true``, and under /tf the hand in the
+    first camera's nominal frame (by Drake at the true angles, and as the run's own
+    arrays compose)."""
+    run, folder = recorded
+    model = model_for_run(run)
+    frames = [("camera", "camera_depth_optical_frame", "camera_true"),
+              ("post_camera", "post_camera_depth_optical_frame", "post_camera_true")]
+    assert model.camera_names == [name for name, _, _ in frames]
+    [post] = run.other_cameras
+    assert np.any(post.truth_camera_offset != run.truth_camera_offset)  # its own
+    topics = check_truth_under_tf(model, run, folder / "run.mcap", frames)
+    for k, ((_, tf), (_, pose)) in enumerate(zip(topics["/tf"], topics["/truth/hand_pose"])):
+        _, X = hand_under_tf(pose, tf)
+        np.testing.assert_allclose(
+            X, camera_offset_transform(run.truth_camera_offset[k]) @ run.truth_X_CE[k],
+            rtol=0, atol=1e-9, err_msg=f"sample {k}")
+
+
+def test_a_further_camera_without_its_true_offset_is_named(recorded, tmp_path):
+    run, _ = recorded
+    [post] = run.other_cameras
+    broken = dataclasses.replace(run, other_cameras=[dataclasses.replace(post)])
+    broken.other_cameras[0].truth_camera_offset = post.truth_camera_offset[:-1]
+    with pytest.raises(ValueError, match=r"camera 'post_camera': its true camera offset "
+                                         r"is missing .*'post_camera_true'"):
+        write_run_bag(broken, tmp_path / "run.mcap")
+    assert not list(tmp_path.iterdir())
 
 
 def test_tracking_the_bag_gives_the_estimates_of_the_run(recorded, capsys):
