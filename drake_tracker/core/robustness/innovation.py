@@ -31,6 +31,11 @@ samples within 10 mm went from 82.7 % to 87.5 %, and 92.7 % of the samples withi
 still said ``tracking``. The result hardly moves with p (1.3 % at p = 0.05, 1.6 % at
 0.001): inconsistent images are far in the tail. What it cannot see: a world robot that
 differs from the model (its innovations look consistent while the hand is 10-20 mm off).
+
+Its cost is at the start: the start-up search's images move the belief by more than its
+variance allows (2-4.5 per degree of freedom), so ``tracking`` comes a few images later.
+On the same runs' first second, ``tracking`` samples within 10 mm went from 1057 to 683
+(of 1354), while ``tracking`` was within 10 mm on 97.6 % of its samples against 93.3 %.
 """
 
 from __future__ import annotations
