@@ -78,7 +78,7 @@ def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
         else:
             assert with_it.state == without.state, k
         for field in ("disagreeing_in_a_row", "agreeing_in_a_row", "confirmed_s",
-                      "acquired", "left_view"):
+                      "acquired"):
             assert getattr(with_it, field) == getattr(without, field), (k, field)
     assert with_it.state == HealthState.TRACKING
 
@@ -105,7 +105,7 @@ def test_an_image_that_does_not_confirm_the_estimate_reports_uncertain_and_nothi
         assert a.state.name[0] == state, k
         assert b.state == (HealthState.UNCERTAIN if k == 0 else HealthState.TRACKING)
         for field in ("disagreeing_in_a_row", "agreeing_in_a_row", "confirmed_s",
-                      "acquired", "left_view"):
+                      "acquired"):
             assert getattr(a, field) == getattr(b, field), (k, field)
     with pytest.raises(ValueError, match="tracking_agreement"):
         HealthParams(tracking_agreement=1.5).validate()
@@ -124,13 +124,12 @@ def test_acquired_while_a_recent_image_confirmed_the_estimate():
     for t, acquired in ((0.5, True), (1.0, True), (1.1, False), (3.0, False)):
         h = next_health(h, ImageConsistency(t, 0, 0.0, 0.0), p)
         assert (h.state, h.acquired) == (HealthState.UNCERTAIN, acquired), t
-        assert h.left_view  # the estimate's arm rendered out of view
     h = next_health(h, ImageConsistency(3.1, 100, 0.9, 0.02), p)
-    assert h.acquired and h.confirmed_s == 3.1 and not h.left_view
-    # Hidden behind something (rendered in view, 95 % nearer in the image): not left.
+    assert h.acquired and h.confirmed_s == 3.1
+    # Hidden behind something (rendered in view, 95 % nearer in the image): not held.
     for t in (3.5, 4.0, 5.0):
         h = next_health(h, ImageConsistency(t, 100, 0.05, 0.0, occluded=0.95), p)
-    assert not h.acquired and not h.left_view
+    assert not h.acquired
     with pytest.raises(ValueError, match="reacquire_after_s"):
         HealthParams(reacquire_after_s=0.0).validate()
 

@@ -8,7 +8,6 @@ the encoders' arm, and the better explanation of the image wins by a margin.
 """
 
 import logging
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,7 +24,6 @@ from drake_tracker.core.robustness.health import (
     HealthParams,
     ImageConsistency,
     TrackerHealth,
-    is_reacquiring,
     is_surprising,
 )
 from drake_tracker.params.resolve import resolve_tracker_params
@@ -125,49 +123,5 @@ def test_an_unsurprising_image_gets_no_second_opinion(scene):
     np.testing.assert_array_equal(outcome.result.mean, alone.result.mean)
     np.testing.assert_array_equal(outcome.observation.information,
                                   alone.observation.information)
-
-
-def test_an_image_is_reacquiring_when_it_sees_an_arm_held_before_again():
-    params = HealthParams()  # min_robot_pixels 30
-    seen = ImageConsistency(5.0, 900, 0.9, 0.0)
-    lost_sight = TrackerHealth(acquired=False, confirmed_s=2.0, left_view=True)
-    assert is_reacquiring(lost_sight, seen, params)
-    # An arm that was only hidden behind something (never out of view) does not count.
-    assert not is_reacquiring(replace(lost_sight, left_view=False), seen, params)
-    # Held now, never held (the start), or held before a restart (confirmed_s reset).
-    assert not is_reacquiring(TrackerHealth(acquired=True, confirmed_s=4.9), seen, params)
-    assert not is_reacquiring(TrackerHealth(acquired=False, left_view=True), seen, params)
-    # Too little of the estimate's arm unhidden to say anything.
-    hidden = ImageConsistency(5.0, 900, 0.9, 0.0, occluded=0.97)
-    assert not is_reacquiring(lost_sight, hidden, params)
-    off = HealthParams(second_opinion_on_reacquisition=False)
-    assert not is_reacquiring(lost_sight, seen, off)
-
-
-@pytest.mark.parametrize("confirmed_s, enabled, searched", [
-    (3.0, True, True),      # the arm was held until 3 s and is seen again at 5 s
-    (-np.inf, True, False),  # never held: the start's search is the update itself
-    (3.0, False, False),     # second_opinion_on_reacquisition off
-])
-def test_the_images_that_see_the_arm_again_get_the_second_opinion(scene, confirmed_s,
-                                                                  enabled, searched):
-    """A belief carried over a gap can be far off while its image does not look
-    surprising (never, here: ``second_opinion_agreement`` 0); on re-acquisition the
-    search from the encoders' arm is asked anyway, and wins on the wrong fold."""
-    model, truth, reading, frame = scene
-    prior = prior_at(model, reading, folded(model, truth))
-    params = TrackerParams()
-    params.health.second_opinion_agreement = 0.0
-    params.health.second_opinion_on_reacquisition = enabled
-    health = TrackerHealth(acquired=False, confirmed_s=confirmed_s, left_view=True)
-    outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)).observe(frame,
-    prior, 0.1, health)
-    assert outcome.restarted == searched
-    after = hand_error_mm(model, truth, outcome.observation.apply(prior)[MEAN_A])
-    encoders = hand_error_mm(model, truth, full_reading(model, reading))
-    if searched:
-        assert after < 0.5 * encoders
-    else:  # the update alone, from the fold
-        assert after > encoders
 
 

@@ -40,7 +40,6 @@ from drake_tracker.core.robustness.health import (
     image_consistency,
     is_consistent,
     is_misplaced,
-    is_reacquiring,
     is_surprising,
     restart_due,
     shows_no_arm,
@@ -219,10 +218,9 @@ class ImageProcessor:
         if result is None:
             return ImageOutcome(None, None, None)
         # (A restart above has cleared ``acquired``.) A second opinion from the encoders'
-        # arm on an image that contradicts the held arm, or that sees it again.
-        if self.params.use_joint_readings and not restarted and (
-                is_reacquiring(health, predicted, self.params.health) if not acquired
-                else is_surprising(predicted, self.params.health, health.latest)):
+        # arm on an image that contradicts the held arm.
+        if self.params.use_joint_readings and not restarted and acquired and \
+                is_surprising(predicted, self.params.health, health.latest):
             overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
                                                   rng, frame.sequence)
         else:

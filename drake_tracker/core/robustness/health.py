@@ -142,14 +142,6 @@ class HealthParams:
     #: test at every resolution. 0.021: 100 nats at the quick suite's 4,730 valid
     #: pixels (80 x 60), the fixed margin it replaces.
     second_opinion_margin_nats_per_pixel: float = 0.021
-    #: The images that see the arm again after it was out of view or hidden (held once,
-    #: not within ``reacquire_after_s``: ``is_reacquiring``) get the same second opinion.
-    #: Measured on in-out-in/constant seed 0: the estimate's decomposition of the hand
-    #: pose (shoulder +14 deg, head pan +11 deg against the truth) put the returning arm
-    #: 150-280 mm behind the image's; the occlusion estimate took the nearer true arm for
-    #: an occluder, the health said tracking, and the update folded the elbow (j4 -119
-    #: deg, 997 mm) with 99 % of its pixels agreeing, for good.
-    second_opinion_on_reacquisition: bool = True
     #: While some joint's bias estimate lies beyond this many standard deviations of the
     #: bias model's spread (stationary or initial, and one jump: 10.3 deg by default), a
     #: challenger belief searches from the encoders' arm (``core/robustness/second_opinion.py``).
@@ -234,10 +226,6 @@ class TrackerHealth:
     #: Since when the images have shown the estimate's arm out of view and the encoders'
     #: in view (``is_misplaced``; inf: the latest image did not).
     misplaced_since_s: float = float("inf")
-    #: Whether an image since the latest confirmation rendered the estimate's arm (almost)
-    #: out of view (fewer than ``min_robot_pixels`` on valid pixels): the arm left the view,
-    #: rather than only hiding behind something (``is_reacquiring``).
-    left_view: bool = False
     #: The challenger belief, while one searches or rests (``core/robustness/second_opinion.py``).
     challenger: Challenger | None = None
     #: The latest applied images' innovations (``core/robustness/innovation.py``).
@@ -288,23 +276,6 @@ def is_surprising(image: ImageConsistency, params: HealthParams,
     return contradicts(image) and (previous is None or contradicts(previous))
 
 
-def is_reacquiring(health: TrackerHealth, image: ImageConsistency,
-                   params: HealthParams) -> bool:
-    """Whether an image sees the estimate's arm again (``min_robot_pixels`` unhidden)
-    after the tracker held it once and then lost it out of view (``left_view``) for longer
-    than ``reacquire_after_s``: not at the start, nor after a restart, whose prior is
-    already the encoders' arm. Such images get the second opinion
-    (``second_opinion_on_reacquisition``): the belief carried over the gap by the
-    encoders alone can be far off while what it renders still looks plausible. An arm
-    that only hid behind something does not count: the second opinion's comparison
-    scores the image without the occlusion estimate, and there a configuration that
-    dodges the occluder wins (measured on occlusion-lasting/constant, quick suite: 19.6
-    mm median, 64 mm p99 without; 32.2 and 260 with hidden arms counted)."""
-    return bool(params.second_opinion_on_reacquisition and not health.acquired
-                and health.left_view and np.isfinite(health.confirmed_s)
-                and image.visible_robot_pixels >= params.min_robot_pixels)
-
-
 def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,
                  params: HealthParams) -> bool:
     """Whether an image finds the encoders' arm (zero bias) in view and the estimate's
@@ -350,8 +321,6 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
     confirmed = image.time_s if state == HealthState.TRACKING else health.confirmed_s
     acquired = image.time_s - confirmed <= params.reacquire_after_s
     since = min(health.misplaced_since_s, image.time_s) if misplaced else float("inf")
-    left_view = state != HealthState.TRACKING and (
-        health.left_view or image.robot_pixels < params.min_robot_pixels)
     confirmed_twice = confirms(image, params) and (
         health.latest is None or confirms(health.latest, params))
     if state == HealthState.TRACKING and (challenger is not None or not confirmed_twice):
@@ -371,4 +340,4 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
             # a wrong mode being followed): reported only, like the case above.
             state = HealthState.UNCERTAIN
     return TrackerHealth(state, image, bad, good, confirmed, acquired, health.restarts, since,
-                         left_view, challenger, innovations)
+                         challenger, innovations)

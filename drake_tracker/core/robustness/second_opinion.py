@@ -9,7 +9,7 @@ answer when the image's log-likelihood at their mean beats it by
 scored on the image without the occlusion estimate):
 
 * :meth:`EncoderSearch.second_opinion`: one image's search, on an image that contradicts
-  the estimate (``is_surprising``) or sees the arm again (``is_reacquiring``);
+  the estimate (``is_surprising``);
 * :meth:`EncoderSearch.challenge`: a *challenger belief* (:class:`Challenger`) kept
   over images while the estimate's biases are implausible (beyond
   ``health.challenger_bias_sigmas`` of the bias model's spread on some joint). One image
