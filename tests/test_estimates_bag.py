@@ -99,6 +99,16 @@ def read_bag(path):
     return out
 
 
+def bag_of(model, written, path, frame_ids=None):
+    """``written`` estimates through an :class:`EstimatesBag` at ``path`` (the input's
+    frame ids ``frame_ids``), read back by :func:`read_bag`."""
+    bag = EstimatesBag(path, model, BASE_NS, frame_ids)
+    for estimate in written:
+        bag.write(estimate)
+    bag.close()
+    return read_bag(path)
+
+
 def transform_of(message):
     """The 4x4 pose of a ``TransformStamped``'s child frame in its parent."""
     r, p = message.transform.rotation, message.transform.translation
@@ -167,11 +177,7 @@ def test_each_cameras_offset_and_the_health_read_back(cameras, apollo, two_camer
     model = apollo if cameras == "one" else two_cameras
     written = estimates(model)
     frame_ids = {name: FRAME_IDS[name] for name in model.camera_names}
-    bag = EstimatesBag(tmp_path / "estimates.mcap", model, BASE_NS, frame_ids)
-    for estimate in written:
-        bag.write(estimate)
-    bag.close()
-    topics = read_bag(tmp_path / "estimates.mcap")
+    topics = bag_of(model, written, tmp_path / "estimates.mcap", frame_ids)
     assert sorted(topics) == sorted([HAND_POSE_TOPIC, JOINT_STATES_TOPIC, TF_TOPIC,
                                      HEALTH_TOPIC])
     stamps = [stamp_ns(BASE_NS, e.time_s) for e in written]
@@ -238,11 +244,7 @@ def test_the_hand_pose_under_tf_is_the_hand_in_the_input_camera_frame(
         belief[VAR_A] = belief[VAR_B] = 1.0
         written.append(estimate_from_belief(model, readout, 0.1 * k, belief))
     frame_ids = {name: FRAME_IDS[name] for name in model.camera_names}
-    bag = EstimatesBag(tmp_path / "estimates.mcap", model, BASE_NS, frame_ids)
-    for estimate in written:
-        bag.write(estimate)
-    bag.close()
-    topics = read_bag(tmp_path / "estimates.mcap")
+    topics = bag_of(model, written, tmp_path / "estimates.mcap", frame_ids)
     for estimate, (_, pose), (_, tf) in zip(written, topics[HAND_POSE_TOPIC],
                                             topics[TF_TOPIC], strict=True):
         parent, X = hand_under_tf(pose, tf)
@@ -260,11 +262,7 @@ def test_without_frame_ids_the_cameras_hang_from_the_model_frames(two_cameras, t
     partial = {"post": FRAME_IDS["post"]}
     assert [p for _, p, _ in camera_tf_frames(model, partial)] == [NOMINAL["camera"],
                                                                     FRAME_IDS["post"]]
-    bag = EstimatesBag(tmp_path / "estimates.mcap", model, BASE_NS)
-    for estimate in estimates(model, count=1):
-        bag.write(estimate)
-    bag.close()
-    topics = read_bag(tmp_path / "estimates.mcap")
+    topics = bag_of(model, estimates(model, count=1), tmp_path / "estimates.mcap")
     [(_, tf)], [(_, pose)] = topics[TF_TOPIC], topics[HAND_POSE_TOPIC]
     assert [(t.header.frame_id, t.child_frame_id) for t in tf.transforms] == [
         (NOMINAL["camera"], "camera_estimated"), (NOMINAL["post"], "post_estimated")]
