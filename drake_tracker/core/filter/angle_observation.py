@@ -123,6 +123,19 @@ class AngleObservation:
         precision = np.where(tighter, precision, 0.0)
         return AngleObservation(precision, information)
 
+    def innovation(self, prior: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """This observation's innovation against ``prior`` (5, n), joint by joint: the
+        observed angle ``z = information / precision`` (``R = 1 / precision``) against
+        the prior ``N(mu, s)``, ``nu = z - mu`` with predicted variance ``S = s + R``.
+        Returns ``(informs, nu, S)``, (n,) each: ``informs`` marks the joints where the
+        image says at least as much as the prior (``R <= s``). Elsewhere the shift of the
+        CPF's mean is mostly its Monte-Carlo error (about ``s / N_eff``), which ``R``
+        does not hold, and ``nu`` and ``S`` there are finite placeholders."""
+        informs = self.precision * prior[VAR_A] >= 1.0
+        safe = np.where(informs, self.precision, 1.0)
+        return (informs, self.information / safe - prior[MEAN_A],
+                prior[VAR_A] + 1.0 / safe)
+
     def shifted(self, angle_shift: np.ndarray) -> AngleObservation:
         """The same observation of ``a + angle_shift`` expressed as one of ``a``.
 

@@ -44,7 +44,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drake_tracker.core.filter.angle_observation import AngleObservation
-from drake_tracker.core.filter.kalman import MEAN_A, VAR_A
 
 #: Images the rate's exponential average spans (eq. 2): 2 s at 10 images/s. One image's
 #: squared innovation is a chi-square of one degree of freedom (relative standard
@@ -87,18 +86,14 @@ class BiasNoiseMatch:
         if not (np.isfinite(dt) and dt > 0) or observation.restart is not None \
                 or not observation.informs_bias_noise:
             return replace(self, last_image_s=max(t, self.last_image_s))
-        precision = observation.precision
-        # A joint counts where the image says at least as much as the prior (R <= s):
-        # there the shift of the CPF's mean is mostly information; where the image says
-        # little, it is mostly the mean's Monte-Carlo error (about s / N_eff), which the
-        # observation's R does not hold, and which would read as a drift.
-        seen = self.adapts & (precision * prior[VAR_A] >= 1.0)
+        # A joint counts where the image says at least as much as the prior (R <= s,
+        # ``AngleObservation.innovation``): where it says little, the shift of the CPF's
+        # mean would read as a drift.
+        informs, nu, innovation_var = observation.innovation(prior)  # S = s + R
+        seen = self.adapts & informs
         if not seen.any():
             return replace(self, last_image_s=t)
-        safe = np.where(seen, precision, 1.0)
-        z = observation.information / safe
-        innovation_var = prior[VAR_A] + 1.0 / safe  # S = s + R
-        nu2 = np.minimum((z - prior[MEAN_A]) ** 2, INNOVATION_CLIP_VARIANCES * innovation_var)
+        nu2 = np.minimum(nu ** 2, INNOVATION_CLIP_VARIANCES * innovation_var)
         estimate = self.rate_var + (nu2 - innovation_var) / dt  # eq. (1)
         averaged = self.rate_var + (estimate - self.rate_var) / MATCHING_IMAGES  # eq. (2)
         rate = np.where(seen, np.clip(averaged, self.min_var, self.max_var), self.rate_var)

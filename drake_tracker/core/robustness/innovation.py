@@ -46,7 +46,6 @@ from statistics import NormalDist
 import numpy as np
 
 from drake_tracker.core.filter.angle_observation import AngleObservation
-from drake_tracker.core.filter.kalman import MEAN_A, VAR_A
 
 #: Images whose innovations the test (2) pools: half a second at 10 images/s.
 WINDOW_IMAGES = 5
@@ -78,14 +77,11 @@ def image_innovation(prior: np.ndarray, observation: AngleObservation,
     observation has none (``NO_INNOVATION``)."""
     if observation.restart is not None:
         return NO_INNOVATION
-    precision = observation.precision
-    s = prior[VAR_A]
-    seen = joints & (precision * s >= 1.0)
+    informs, nu, innovation_var = observation.innovation(prior)
+    seen = joints & informs
     if not seen.any():
         return NO_INNOVATION
-    z = observation.information[seen] / precision[seen]
-    innovation_var = s[seen] + 1.0 / precision[seen]  # S = s + R
-    nis = float(np.sum((z - prior[MEAN_A][seen]) ** 2 / innovation_var))
+    nis = float(np.sum(nu[seen] ** 2 / innovation_var[seen]))
     return (nis, int(seen.sum()))
 
 
