@@ -7,6 +7,7 @@ image contradicted it enough for the one-image second opinion.
 """
 
 import logging
+import time
 
 import numpy as np
 import pytest
@@ -182,3 +183,31 @@ def apollo_out_of_view():
     bias[[model.robot_joint_names.index(n) for n in ("arm_joint_2", "arm_joint_4")]] = \
         np.radians(-6.0)
     return model, truth, frame, out_of_view_prior(model, truth, bias)
+
+
+def test_the_decision_times_hold_the_searches_beside_the_update(scene):  # noqa: F811
+    """``ImageProcessor.times`` splits each image's time: the tracked belief's update
+    (the CPF's own clock, ``StageTimes.per_update``, holds its first call of the image)
+    counts as the update, the challenger's search (the image's other CPF calls) as the
+    decision, and together they are the image's time (intervals nested in one clock)."""
+    model, truth, reading, frame = scene
+    prior = prior_at(model, reading, truth)
+    prior[MEAN_B][model.joint_names.index("arm_joint_3")] = np.radians(40.0)
+    params = TrackerParams()
+    params.health.second_opinion_agreement = 0.0
+    params.health.second_opinion_margin_nats_per_pixel = 1e2  # it never wins
+    processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
+    times, challenger = processor.times, None
+    for image in range(1, 3):
+        before = (times.update_s, times.decision_s, len(processor.update.times.per_update))
+        start = time.perf_counter()
+        outcome = processor.observe(frame, prior, 0.0,
+                                    TrackerHealth(acquired=True, challenger=challenger))
+        wall = time.perf_counter() - start
+        challenger = outcome.challenger
+        main, *searches = list(processor.update.times.per_update)[before[2]:]
+        update, decision = times.update_s - before[0], times.decision_s - before[1]
+        assert times.images == image and len(searches) >= 1
+        assert main <= update and sum(searches) <= decision
+        assert update + decision <= wall
+    assert 0 < times.decision_share == times.decision_s / times.update_s

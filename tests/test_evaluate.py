@@ -239,6 +239,13 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     assert set(env["versions"]) == {"drake", "numpy", "numba", "llvmlite", "python"}
     assert env["cpu"] and env["numba_threads"] >= 1 and env["tasks"] == 1
     assert env["compile_target"]  # e.g. znver4: what the kernels' rounding depends on
+    # The stored task keeps where the tracker's image time went (``DecisionTimes``): one
+    # image observed per 0.1 s of the 1.5 s run at most, split into update and decision.
+    meta = json.loads((tmp_path / f"results/{task.name}.json").read_text())
+    times = meta["decision_times"]
+    assert list(times) == ["full_fusion"]  # the encoders alone observe no image
+    assert 5 <= times["full_fusion"]["images"] <= 16
+    assert times["full_fusion"]["update_s"] > 0 and times["full_fusion"]["decision_s"] > 0
     # Resuming with another protocol in the same folder is refused, by name.
     other = Task("s-full-arm", "constant", 0, 2.0, 0.1, ("encoders_only", "full_fusion"))
     with pytest.raises(ValueError, match="another protocol"):

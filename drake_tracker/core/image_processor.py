@@ -11,6 +11,7 @@ the update. The per-image bookkeeping around it (stamps, pacing, placement, heal
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -88,6 +89,25 @@ class ImageOutcome:
     innovation: Innovation | None = None
 
 
+@dataclass
+class DecisionTimes:
+    """Wall time of :meth:`ImageProcessor.observe` (s), accumulated over its images:
+    ``update_s`` is the paper's image update (the frame's preparation and the CPF search
+    of the tracked belief), ``decision_s`` everything around it (the renders of the
+    estimate's and the encoders' arms and their comparison with the image, the restart,
+    the occlusion estimate, the jump gate, the second opinion's and the challenger's
+    searches). ``images`` counts the frames observed."""
+
+    images: int = 0
+    update_s: float = 0.0
+    decision_s: float = 0.0
+
+    @property
+    def decision_share(self) -> float:
+        """The decision's time over the update's (NaN before any update)."""
+        return self.decision_s / self.update_s if self.update_s > 0 else float("nan")
+
+
 class ImageProcessor:
     """Turns a depth frame and the prior at its time into a pseudo-observation.
 
@@ -129,6 +149,8 @@ class ImageProcessor:
             im.search_depth_widening_m)
         self.search = EncoderSearch(self.update, params, self._occlusion_aware,
                                     self.restart)
+        #: Where :meth:`observe`'s time went (``bench/decision.py`` reads it).
+        self.times = DecisionTimes()
 
     def jump_probability(self, elapsed_s: float) -> np.ndarray:
         """(n,) probability that each joint's bias jumped within ``elapsed_s`` (the time
@@ -146,10 +168,23 @@ class ImageProcessor:
         and its consistency with the estimate; ``elapsed_s`` is the time since the
         previous applied image; ``health`` the tracker's before this image (default: it
         holds the arm): until the arm is ``acquired``, the update searches with
-        ``image.acquisition_num_particles``."""
+        ``image.acquisition_num_particles``. Its time goes into ``times``."""
+        start, update_before = time.perf_counter(), self.times.update_s
+        try:
+            return self._observe(frame, prior, elapsed_s, health)
+        finally:
+            times = self.times
+            times.images += 1
+            times.decision_s += (time.perf_counter() - start) - (times.update_s
+                                                                 - update_before)
+
+    def _observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float,
+                 health: TrackerHealth | None) -> ImageOutcome:
         health = TrackerHealth(acquired=True) if health is None else health
         acquired = health.acquired
+        start = time.perf_counter()
         observation = self.update.prepare(frame.depth_m)
+        self.times.update_s += time.perf_counter() - start
         check_depth_units(frame.depth_m)  # a millimetre image is an error, not a blank
         if observation.num_valid == 0:
             return ImageOutcome(None, None, None)
@@ -212,9 +247,11 @@ class ImageProcessor:
         # An arm never held since the start or a restart: the search may be widened in
         # depth (image.search_depth_widening_m).
         never_held = not acquired and (restarted or not np.isfinite(health.confirmed_s))
+        start = time.perf_counter()
         result = self.update(prior, observation, rng, jumps, self._jump_std,
                              None if acquired else self.params.image.acquisition_num_particles,
                              coarse_sweeps=acquired, widened=never_held)
+        self.times.update_s += time.perf_counter() - start
         if result is None:
             return ImageOutcome(None, None, None)
         # (A restart above has cleared ``acquired``.) A second opinion from the encoders'

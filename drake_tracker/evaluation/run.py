@@ -147,9 +147,17 @@ def cost_line(metas: list[dict], wall_s: float, tasks_run: int) -> str:
         return f"{tasks_run} task(s) run in {wall_s:.0f} s"
     task_wall = sum(sum(m["wall_s"].values()) for m in timed)
     simulated = sum(m["simulated_s"] for m in timed)
-    return (f"{tasks_run} task(s) run in {wall_s:.0f} s; stored tasks: "
+    line = (f"{tasks_run} task(s) run in {wall_s:.0f} s; stored tasks: "
             f"{task_wall / simulated:.2f} s of worker time per simulated task-second "
             f"({len(timed)} tasks, {simulated:.0f} task-seconds)")
+    times = [t for m in timed for t in m.get("decision_times", {}).values()]
+    update_s = sum(t["update_s"] for t in times)
+    if update_s > 0:  # tasks stored before the decision was timed have none
+        share = 100 * sum(t["decision_s"] for t in times) / update_s
+        images = sum(t["images"] for t in times)
+        line += (f"; the per-image decision took {share:.1f} % of the image updates' time "
+                 f"({images} images of {len(times)} replays)")
+    return line
 
 
 class TerminatedError(Exception):

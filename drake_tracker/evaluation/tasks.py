@@ -162,12 +162,15 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
                  sample_period_s: float = SAMPLE_PERIOD_S,
                  base_params: TrackerParams | None = None,
                  tracker_seed: int = 0, report: Reporter | None = None,
-                 wall_s: dict[str, float] | None = None) -> dict[str, dict[str, np.ndarray]]:
+                 wall_s: dict[str, float] | None = None,
+                 decision_times: dict[str, dict] | None = None
+                 ) -> dict[str, dict[str, np.ndarray]]:
     """Errors of each method on one recorded run, at regular sample times.
 
     ``tracker_seed`` is added to the parameters' ``image.seed``. Returns
     {method: {"times_s", "translation_mm", "rotation_deg"}}; each method's wall time
-    goes into ``wall_s`` if given.
+    goes into ``wall_s`` if given, and each tracking method's image times
+    (``ReplayResult.decision_times``) into ``decision_times``.
     """
     from drake_tracker.io.replay import encoders_only_X_CE, model_for_run, replay_run
 
@@ -190,6 +193,8 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
                                      tracker_seed)
             replay = replay_run(run, params, model, sample_times_s=times)
             X, health = replay.X_CE, replay.health
+            if decision_times is not None:
+                decision_times[method] = replay.decision_times
         if wall_s is not None:
             wall_s[method] = time.perf_counter() - start
         ok = np.all(np.isfinite(X.reshape(len(X), -1)), axis=1)
@@ -299,7 +304,8 @@ def _load_or_simulate(task: Task, cache_dir: Path | None, report: Reporter):
 def compute_task(task: Task, cache_dir: Path | None = None,
                  report: Reporter | None = None) -> dict:
     """Runs one task and returns its payload: ``{"name", "csv", "environment",
-    "simulated_s", "wall_s": {"simulate", <method>...}}``.
+    "simulated_s", "wall_s": {"simulate", <method>...}, "decision_times": {<method>:
+    {"images", "update_s", "decision_s"}}}``.
 
     ``cache_dir``: where simulated runs are cached (``None`` when the worker shares no
     file system with the driver: the run is simulated and not kept).
@@ -307,13 +313,13 @@ def compute_task(task: Task, cache_dir: Path | None = None,
     report = report or (lambda message: None)
     start = time.perf_counter()
     run = _load_or_simulate(task, cache_dir, report)
-    wall_s = {"simulate": time.perf_counter() - start}
+    wall_s, decision_times = {"simulate": time.perf_counter() - start}, {}
     errors = evaluate_run(run, task.methods, task.min_image_interval_s,
                           base_params=task_base_params(task), tracker_seed=task.seed,
-                          report=report, wall_s=wall_s)
+                          report=report, wall_s=wall_s, decision_times=decision_times)
     return {"name": task.name, "csv": errors_csv_text(task, errors),
             "environment": environment(), "simulated_s": float(run.duration_s),
-            "wall_s": wall_s}
+            "wall_s": wall_s, "decision_times": decision_times}
 
 
 class TaskRunner:

@@ -61,6 +61,9 @@ class ReplayResult:
     #: (T,) the health state reported at each sample (``HealthState`` value; -1 before
     #: the tracker started).
     health: np.ndarray | None = None
+    #: The image processors' ``DecisionTimes`` summed over the cameras: ``images``,
+    #: ``update_s`` and ``decision_s`` (``core/image_processor.py``).
+    decision_times: dict | None = None
 
 
 def robot_config_from_yaml(text: str) -> RobotConfig:
@@ -131,7 +134,17 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
         num_images_skipped=tracker.num_images_skipped + sum(counts.source_skipped.values()),
         image_update_s=list(tracker.images.update.times.per_update) if tracker.images else [],
         wall_time_s=time.perf_counter() - t_start,
+        decision_times=summed_decision_times(tracker),
     )
+
+
+def summed_decision_times(tracker: Tracker) -> dict:
+    """``images``, ``update_s`` and ``decision_s`` of ``tracker``'s image processors
+    (``ImageProcessor.times``), summed over its cameras."""
+    processors = [c.images for c in tracker.channels.values() if c.images is not None]
+    return {"images": sum(p.times.images for p in processors),
+            "update_s": sum(p.times.update_s for p in processors),
+            "decision_s": sum(p.times.decision_s for p in processors)}
 
 
 def readings_at(run: RecordedRun, times_s: np.ndarray) -> np.ndarray:
