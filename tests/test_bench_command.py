@@ -16,7 +16,7 @@ def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):
     for key in ("machine", "robots", "image_updates_per_s_2000_1_thread",
                 "image_updates_per_s_2000_2_threads", "cad_over_bench_cost_per_evaluation",
                 "image_updates_per_s_default", "kf_step_us", "replay_us_per_reading",
-                "demo", "tracker_alone", "reading_path"):
+                "demo", "tracker_alone", "reading_path", "decision"):
         assert key in result, key
     assert set(result["machine"]) >= {"llvm_cpu", "avx512f", "numba_threading_layer"}
     bench, cad = result["robots"]["apollo"], result["robots"]["apollo_cad"]
@@ -32,6 +32,11 @@ def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):
         assert robot["depth_p95_mm_vs_drake"] <= 10.0
     assert result["image_updates_per_s_2000_1_thread"] > 0
     assert result["demo"]["real_time_factor"] > 0
+    cases = result["decision"]["cases"]  # the demo's scenario and the suite's hard cases
+    assert len(cases) == 4 and all(c["images"] > 0 and c["update_s"] > 0 for c in cases.values())
+    pooled = sum(c["decision_s"] for c in cases.values()) / sum(
+        c["update_s"] for c in cases.values())
+    assert math.isclose(result["decision"]["pooled_decision_share"], pooled)
 
 
 def test_the_bench_command_runs_the_reading_path_alone(tmp_path, capsys):

@@ -6,7 +6,7 @@ import math
 import pytest
 
 from drake_tracker.bench.readings import bench_reading_path, format_reading_path
-from drake_tracker.bench.run import (
+from drake_tracker.bench.realtime import (
     bench_demo,
     bench_tracker_alone,
     format_demo,

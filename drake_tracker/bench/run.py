@@ -43,7 +43,9 @@ Keys of ``bench.json``:
   deadline_waits``) with the Simulator's wait per simulated second;
 * ``reading_path``: what each joint reading costs the Simulator's thread in a Diagram,
   on the same recorded sensors (:mod:`drake_tracker.bench.readings`);
-* ``cameras``: an image update's cost, one camera at 30 Hz vs two at 15 Hz (``bench/cameras.py``).
+* ``cameras``: an image update's cost, one camera at 30 Hz vs two at 15 Hz (``bench/cameras.py``);
+* ``decision``: the per-image decision's time beside the image update's, per case and
+  pooled (``bench/decision.py``).
 """
 
 from __future__ import annotations
@@ -57,10 +59,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_tracker.bench.cameras import bench_camera_count, format_camera_count
+from drake_tracker.bench.decision import bench_decision, format_decision
 from drake_tracker.bench.readings import (
     bench_recorded_reading_path,
     format_reading_path,
     record_demo_sensors,
+)
+from drake_tracker.bench.realtime import (
+    bench_demo,
+    bench_tracker_alone,
+    format_demo,
+    format_tracker_alone,
 )
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.filter.angle_observation import AngleObservation
@@ -73,11 +82,6 @@ from drake_tracker.robot.model import TrackerModel, build_tracker_model, robot_p
 
 if TYPE_CHECKING:
     import argparse
-
-    from pydrake.systems.framework import DiagramBuilder
-
-    from drake_tracker.io.recording import RecordedRun
-    from drake_tracker.sim.scenario.load import Scenario
 
 #: The ``image.sweep_image_widths_px`` the bench times beside the defaults.
 COARSE_SWEEP_WIDTHS_PX = [40, 40, 40, 80]
@@ -130,91 +134,6 @@ def bench_kalman(model: TrackerModel, params: TrackerParams, repeats: int = 2000
             "bank_variance_check": float(buffer.present()[1][VAR_A].max())}
 
 
-def add_second_marks(builder: DiagramBuilder, marks: list) -> None:
-    """Adds ``bench_clock``, which appends (simulated s, wall s, the Simulator thread's
-    CPU s, the process's CPU s) to ``marks`` at every simulated second."""
-    from pydrake.systems.framework import LeafSystem
-
-    clock = builder.AddNamedSystem("bench_clock", LeafSystem())
-    clock.DeclarePeriodicPublishEvent(1.0, 0.0, lambda context: marks.append(
-        (context.get_time(), time.perf_counter(), time.thread_time(), time.process_time())))
-
-
-def bench_demo(params: TrackerParams, duration_s: float) -> dict:
-    """The demo's real-time factor on its first ``duration_s`` (see the module doc)."""
-    from drake_tracker.demo.run import (
-        DEFAULT_SCENARIO,
-        demo_hook,
-        render_what_the_tracker_reads,
-        start_meshcat,
-    )
-    from drake_tracker.sim.record import simulate_and_record
-    from drake_tracker.sim.scenario.load import load_scenario
-
-    scenario = render_what_the_tracker_reads(load_scenario(DEFAULT_SCENARIO), params)
-    hook = demo_hook(start_meshcat(), params)
-    marks = []  # filled by add_second_marks
-
-    def add_systems(builder, world):
-        add_second_marks(builder, marks)
-        return hook(builder, world)
-
-    run = simulate_and_record(scenario, duration_s=duration_s,
-                              image_stride=scenario.camera.render_stride,
-                              add_systems=add_systems, validate=False)
-    wall_end, cpu_end = time.perf_counter(), time.process_time()
-    after = [(t, wall) for t, wall, *_ in marks if t == 1.0]
-    return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s,
-            "render_stride": scenario.camera.render_stride,
-            # the same figure as the demo's report.json
-            "real_time_factor": run.duration_s / run.extra["wall_time_s"],
-            "real_time_factor_after_1s": ((run.duration_s - 1.0) / (wall_end - after[0][1])
-                                          if after and run.duration_s > 1.5 else None),
-            "real_time_factor_cpu": run.duration_s / (cpu_end - marks[0][3])}
-
-
-def bench_tracker_alone(params: TrackerParams, duration_s: float,
-                        recording: tuple[Scenario, RecordedRun] | None = None) -> dict:
-    """The tracker's Diagram alone on the demo's recorded sensors (see the module doc);
-    ``recording``: :func:`record_demo_sensors`'s, else made here."""
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-
-    from drake_tracker.demo.run import DEFAULT_SCENARIO
-    from drake_tracker.systems.add_tracker import AddTracker
-    from drake_tracker.systems.recorded_run_source import RecordedRunSource
-
-    scenario, run = recording or record_demo_sensors(params, duration_s)
-    model = build_tracker_model(scenario.resolved_robot_config())
-    builder = DiagramBuilder()
-    source = builder.AddSystem(RecordedRunSource(run))
-    tracker = AddTracker(builder, model=model, camera=run.camera_intrinsics, params=params,
-                         measured_position=source.GetOutputPort("measured_position"),
-                         measurement_time=source.GetOutputPort("measurement_time"),
-                         depth=source.GetOutputPort("depth_frame"),
-                         encoder_period_s=1.0 / scenario.encoders.rate_hz)
-    marks = []  # filled by add_second_marks
-    add_second_marks(builder, marks)
-    simulator = Simulator(builder.Build())
-    simulator.AdvanceTo(run.duration_s)
-    end = (time.perf_counter(), time.thread_time(), time.process_time())
-    start = next(m for m in marks if m[0] == 1.0)
-    span = run.duration_s - 1.0
-    cpf = tracker.image_update
-    state = cpf.state(cpf.GetMyContextFromRoot(simulator.get_context()))
-    updates = list(cpf.processor.update.times.per_update)
-    main_cpu = (end[1] - start[2]) / span
-    waits = cpf.deadline_waits
-    return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s,
-            "real_time_factor_after_1s": span / (end[0] - start[1]),
-            "main_thread_cpu_s_per_s": main_cpu,
-            "other_threads_cpu_s_per_s": (end[2] - start[3]) / span - main_cpu,
-            "images_applied_per_s": state.images_applied / run.duration_s,
-            "update_wall_ms_median": 1e3 * float(np.median(updates)) if updates else None,
-            "updates_late": waits.late, "updates_on_time": waits.on_time,
-            "deadline_wait_s_per_s": waits.waited_s / run.duration_s}
-
-
 def run_benchmarks(quick: bool = False) -> dict:
     """All figures of ``bench.json`` (see the module docstring)."""
     from drake_tracker.bench.likelihood import bench_robot, kernel_us_per_evaluation_in_turns
@@ -241,6 +160,7 @@ def run_benchmarks(quick: bool = False) -> dict:
     alone = bench_tracker_alone(params, recording[1].duration_s, recording)
     readings = bench_recorded_reading_path(params, recording, quick)
     cameras = bench_camera_count(params, 2.0 if quick else 4.0)
+    decision = bench_decision(3.0 if quick else 10.0)
     bench, cad = results["apollo"], results["apollo_cad"]
     size = camera.subsampled(bench_stride(camera, params))
     return {
@@ -265,6 +185,7 @@ def run_benchmarks(quick: bool = False) -> dict:
         "tracker_alone": alone,
         "reading_path": readings,
         "cameras": cameras,
+        "decision": decision,
     }
 
 
@@ -346,38 +267,16 @@ def format_bench(result: dict) -> str:
     ]
     lines.append(format_demo(result["demo"]))
     lines.append(format_tracker_alone(result["tracker_alone"]))
-    lines += [format_reading_path(result["reading_path"]), format_camera_count(result["cameras"])]
+    lines += [format_reading_path(result["reading_path"]), format_camera_count(result["cameras"]),
+              format_decision(result["decision"])]
     return "\n".join(lines)
-
-
-def format_demo(demo: dict) -> str:
-    """One line: the demo's real-time factors of :func:`bench_demo`."""
-    after = demo["real_time_factor_after_1s"]
-    after = "" if after is None else f", {after:.2f} after the first second"
-    return (f"demo real-time factor ({demo['scenario']}, first {demo['duration_s']:g} s "
-            f"simulated): {demo['real_time_factor']:.2f} wall-clock{after}, "
-            f"{demo['real_time_factor_cpu']:.2f} per second of CPU time   (target >= 1.0)")
-
-
-def format_tracker_alone(alone: dict) -> str:
-    """Two lines: the tracker alone on recorded sensors (:func:`bench_tracker_alone`)."""
-    update = alone["update_wall_ms_median"]
-    update = "no update" if update is None else f"{update:.0f} ms of wall time each"
-    return (f"tracker alone on the demo's recorded sensors (first {alone['duration_s']:g} s): "
-            f"real-time factor {alone['real_time_factor_after_1s']:.2f} after the first "
-            f"second\n  CPU s per s: the Simulator's thread "
-            f"{alone['main_thread_cpu_s_per_s']:.2f}, the other threads (the image "
-            f"update's worker) {alone['other_threads_cpu_s_per_s']:.2f}; "
-            f"{alone['images_applied_per_s']:.1f} images applied per s, {update}; "
-            f"{alone['updates_late']} of {alone['updates_late'] + alone['updates_on_time']} "
-            f"late at their deadline, {alone['deadline_wait_s_per_s']:.2f} s waited per s")
 
 
 def run_bench(args: argparse.Namespace) -> int:
     """``drake-tracker bench``: runs :func:`run_benchmarks` (fewer repetitions with
-    ``--quick``; with ``--only readings`` or ``cameras`` that figure alone, ``bench.json``
-    then holding ``reading_path`` or ``cameras`` only), prints the figures and writes them to
-    ``OUT/bench.json``; returns 0."""
+    ``--quick``; with ``--only readings``, ``cameras`` or ``decision`` that figure alone,
+    ``bench.json`` then holding ``reading_path``, ``cameras`` or ``decision`` only),
+    prints the figures and writes them to ``OUT/bench.json``; returns 0."""
     quick = getattr(args, "quick", False)
     if getattr(args, "only", None) == "readings":
         params = TrackerParams()
@@ -387,6 +286,9 @@ def run_bench(args: argparse.Namespace) -> int:
     elif getattr(args, "only", None) == "cameras":
         result = {"cameras": bench_camera_count(TrackerParams(), 2.0 if quick else 4.0)}
         print(format_camera_count(result["cameras"]))
+    elif getattr(args, "only", None) == "decision":
+        result = {"decision": bench_decision(3.0 if quick else 10.0)}
+        print(format_decision(result["decision"]))
     else:
         result = run_benchmarks(quick=quick)
         print(format_bench(result))

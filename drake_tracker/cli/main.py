@@ -108,11 +108,13 @@ def _add_bench(sub) -> None:
     p.add_argument("--out", default="out/bench",
                    help="folder for bench.json (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="fewer repetitions")
-    p.add_argument("--only", choices=["readings", "cameras"], default=None,
+    p.add_argument("--only", choices=["readings", "cameras", "decision"], default=None,
                    help="run one part alone: 'readings', what each joint reading costs "
                         "in a Diagram (bench.json then holds reading_path only); "
                         "'cameras', an image update's cost with one camera at 30 Hz and "
-                        "two at 15 Hz (bench.json then holds cameras only)")
+                        "two at 15 Hz (bench.json then holds cameras only); 'decision', "
+                        "the per-image decision's time beside the image update's "
+                        "(bench.json then holds decision only)")
 
     def run(args):
         check_out_dir(args.out)
