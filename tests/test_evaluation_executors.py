@@ -144,6 +144,31 @@ def test_sigterm_stops_the_workers_and_the_same_command_resumes(tmp_path):
     assert (out / "boxplot_s-full-arm.png").exists()
 
 
+def test_sigterm_stops_a_serial_evaluation_inside_a_task(tmp_path):
+    """``--workers 1`` runs the tasks in the command's own process: SIGTERM lands inside
+    a running task, and must stop the sweep there (exit 143), not count as the task's
+    failure and let the sweep go on."""
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "drake_tracker.cli.main", "evaluate", "--quick",
+               "--sequences", "s-full-arm", "--methods", "full_fusion", "--seeds", "3",
+               "--duration", "2", "--settle-s", "0.5", "--workers", "1", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not list((out / "results").glob("*.csv.gz")) and process.poll() is None:
+            assert time.monotonic() < deadline, "no task finished in time"
+            time.sleep(0.05)
+        process.send_signal(signal.SIGTERM)  # the next task has started
+        output, _ = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 143, output
+    assert "the same command resumes" in output and "failed" not in output
+    assert 1 <= len(list((out / "results").glob("*.csv.gz"))) < 3 * 3  # 3 seeds x 3 biases
+
+
 def test_the_ray_executor_without_ray_says_how_to_install_it(tmp_path, monkeypatch):
     from drake_tracker.cli.main import main
 
