@@ -234,6 +234,12 @@ class JointKalmanBank:
                       self._cap)
         return out
 
+    def step_in_place(self, moments: np.ndarray, dt: float, reading: np.ndarray) -> None:
+        """``step_unchecked`` into ``moments`` itself, a writeable (5, n) float array that
+        nothing else holds (the Kalman bank system's copy of its discrete state)."""
+        _step_inplace(moments, dt, reading, self._sa2, self._sb2, self._log_c, self._sq2,
+                      self._cap)
+
 
 def recombine_with_bias(moments: np.ndarray, mean_post: np.ndarray,
                         var_post: np.ndarray) -> np.ndarray:
