@@ -246,7 +246,7 @@ class DelayBufferSystem(LeafSystem):
             s.buffer = new_belief_buffer(p, t, values)
         else:
             s.buffer = s.buffer.copy()
-        s.buffer.add_reading(t, full_reading(p, values))
+        s.buffer.add_reading(t, full_reading(p, values), checked=True)
         s.last_reading_time_s = t
         s.reading = AdmittedReading(s.reading.id + 1, t, values, restarted, s.correction.id)
 

@@ -177,8 +177,13 @@ class BeliefBuffer:
             self._now = float(t)
             self._prune()
 
-    def add_reading(self, t: float, reading: np.ndarray) -> np.ndarray:
-        """Filters a reading stamped ``t`` (after every earlier one); returns the new belief."""
+    def add_reading(self, t: float, reading: np.ndarray, *, checked: bool = False
+                    ) -> np.ndarray:
+        """Filters a reading stamped ``t`` (after every earlier one); returns the new belief.
+        ``checked``: ``reading`` is a float (n,) array that passed the readings' gate
+        (``ReadingGate.admit``: NaN for a joint without a value, no infinity, some value)
+        and is the buffer's to keep (e.g. ``full_reading``'s new array): it is stored as
+        it is, where any other is checked (``JointKalmanBank.check_reading``) and copied."""
         if not math.isfinite(t):
             raise ValueError(f"joint reading time stamp is not finite: {t}")
         if t <= self._last_reading_time:
@@ -186,7 +191,8 @@ class BeliefBuffer:
                 f"joint reading stamped {t} s is not after the previous one "
                 f"({self._last_reading_time} s)")
         t = float(t)
-        reading = self.bank.check_reading(reading).copy()
+        if not checked:
+            reading = self.bank.check_reading(reading).copy()
         k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
         k = self._insert(k, _Event(t, reading=reading),
                          self.bank.step_unchecked(belief, float(t - t0), reading))
