@@ -156,7 +156,8 @@ class DelayBufferSystem(LeafSystem):
         self._index = int(self._state)  # pydrake takes a plain int fastest
         self._reading_out = self.DeclareAbstractOutputPort(
             "reading", lambda: AbstractValue.Make(AdmittedReading()),
-            lambda c, o: o.set_value(self.state(c).reading), state)
+            lambda c, o: o.set_value(c.get_abstract_state(self._index).get_value().reading),
+            state)
         self._correction_out = self.DeclareAbstractOutputPort(
             "correction", lambda: AbstractValue.Make(BeliefCorrection()),
             lambda c, o: o.set_value(self.state(c).correction), state)
@@ -207,7 +208,8 @@ class DelayBufferSystem(LeafSystem):
         return context.get_abstract_state(self._index).get_value()
 
     def _update(self, context: Context, state) -> EventStatus | None:
-        s = self.state(context).copy()  # the stored one is shared with Drake's copies
+        # The stored state is shared with Drake's copies: the update changes its own copy.
+        s = context.get_abstract_state(self._index).get_value().copy()
         # Frames are judged against the buffer the CPF system saw (before this reading).
         changed = False
         for name, port in self._frames.items():

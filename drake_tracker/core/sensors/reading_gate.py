@@ -89,8 +89,10 @@ class ReadingGate:
         return clone
 
     def is_new(self, raw_s: float) -> bool:
-        """Whether a stamp held on a port is a new sample (differs from the last seen)."""
-        return is_new_stamp(raw_s, self.last_raw_s)
+        """Whether a stamp held on a port is a new sample (differs from the last seen):
+        ``is_new_stamp``, asked at every tick of the delay buffer system."""
+        raw, last = float(raw_s), self.last_raw_s  # a float: ``admit`` sets it
+        return not (raw == last or (raw != raw and last != last))
 
     def admit(self, raw_s: float, values: np.ndarray) -> float | None:
         """The reading's time in the tracker's time base, or None (skipped, logged). A
