@@ -193,12 +193,23 @@ class BeliefBuffer:
         t = float(t)
         if not checked:
             reading = self.bank.check_reading(reading).copy()
-        k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
-        k = self._insert(k, _Event(t, reading=reading),
-                         self.bank.step_unchecked(belief, float(t - t0), reading))
         self._last_reading_time = t
-        if k < self._end - 1:
-            self._replay_from(k + 1)
+        log, end = self._log, self._end
+        if self._start < end == len(log.times) and log.times[end - 1] <= t:
+            # The usual reading, after every event: appended to the log in place, as
+            # ``_insert`` would, without the searches (1000 times a second).
+            belief = self.bank.step_unchecked(log.beliefs[end - 1],
+                                              float(t - log.times[end - 1]), reading)
+            log.events.append(_Event(t, reading=reading))
+            log.beliefs.append(belief)
+            log.times.append(t)
+            self._end = end + 1
+        else:
+            k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
+            k = self._insert(k, _Event(t, reading=reading),
+                             self.bank.step_unchecked(belief, float(t - t0), reading))
+            if k < self._end - 1:
+                self._replay_from(k + 1)
         self._now = max(self._now, t)
         self._prune()
         return self._log.beliefs[self._end - 1]
