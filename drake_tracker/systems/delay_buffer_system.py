@@ -211,14 +211,14 @@ class DelayBufferSystem(LeafSystem):
         # The stored state is shared with Drake's copies: the update changes its own copy.
         s = context.get_abstract_state(self._index).get_value().copy()
         # Frames are judged against the buffer the CPF system saw (before this reading).
-        changed = False
+        changed = False  # (EvalAbstract(c).get_value(): an abstract port's Eval, cheaper)
         for name, port in self._frames.items():
-            changed |= self._judge_frame(name, port.Eval(context), s)
+            changed |= self._judge_frame(name, port.EvalAbstract(context).get_value(), s)
         raw = self._time.EvalBasicVector(context)[0]
         if s.readings.is_new(raw):
             changed = True
             self._take_reading(raw, self._position.Eval(context), s)  # Eval gives a copy
-        message = self._observation.Eval(context)
+        message = self._observation.EvalAbstract(context).get_value()
         if message.id > s.last_observation_id and message.observation is not None:
             changed = True
             s.last_observation_id = message.id

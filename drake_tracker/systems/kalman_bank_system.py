@@ -195,7 +195,7 @@ class JointKalmanBankSystem(LeafSystem):
         belief_group, book_group, bias_group = self._groups
         book = discrete_state.get_mutable_value(book_group)
         time_s, last_reading_s, correction_id, reading_id = book.tolist()  # NaN: None
-        reading = self._reading.Eval(context)
+        reading = self._reading.EvalAbstract(context).get_value()  # Eval's value, cheaper
         adopt = False
         if reading.correction_id is None or reading.correction_id > correction_id:
             # The buffer tells the id of its latest correction with each reading: the
