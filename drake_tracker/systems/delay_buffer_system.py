@@ -213,7 +213,9 @@ class DelayBufferSystem(LeafSystem):
         # Frames are judged against the buffer the CPF system saw (before this reading).
         changed = False  # (EvalAbstract(c).get_value(): an abstract port's Eval, cheaper)
         for name, port in self._frames.items():
-            changed |= self._judge_frame(name, port.EvalAbstract(context).get_value(), s)
+            frame = port.EvalAbstract(context).get_value()
+            if frame is not s.cameras[name].frame:  # not the frame judged last
+                changed |= self._judge_frame(name, frame, s)
         raw = self._time.EvalBasicVector(context)[0]
         if s.readings.is_new(raw):
             changed = True
@@ -269,7 +271,7 @@ class DelayBufferSystem(LeafSystem):
     def _judge_frame(self, camera: str, frame: DepthFrame, s: DelayBufferState) -> bool:
         """Step 1, once per new frame of ``camera``; whether there was one."""
         judged = s.cameras[camera]
-        if frame is judged.frame or frame.is_empty or s.buffer is None:
+        if frame.is_empty or s.buffer is None:
             return False
         key = frame_key(frame)
         if key == judged.key:
