@@ -378,9 +378,12 @@ class BeliefBuffer:
                 log.beliefs[i] = event.observation.apply(self.bank.predict(previous, dt))
 
     def _prune(self) -> None:
-        log = self._log
+        log, start = self._log, self._start
         cutoff = self._now - self.horizon_s
-        drop = bisect.bisect_left(log.times, cutoff, self._start, self._end) - self._start
+        if start + 1 < self._end and log.times[start] < cutoff <= log.times[start + 1]:
+            drop = 1  # the usual: one reading in, the oldest out (no search)
+        else:
+            drop = bisect.bisect_left(log.times, cutoff, start, self._end) - start
         # Keep at least the newest event so the present belief stays stored.
         drop = min(drop, self._end - self._start - 1)
         if drop > 0:
