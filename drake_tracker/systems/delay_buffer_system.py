@@ -8,7 +8,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
+from pydrake.systems.framework import (
+    Context,
+    EventStatus,
+    InputPort,
+    LeafSystem,
+    OutputPort,
+    ValueProducer,
+)
 
 from drake_tracker.core.cameras import camera_named
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
@@ -149,6 +156,15 @@ class DelayBufferSystem(LeafSystem):
         self._time = self.DeclareVectorInputPort("measurement_time", 1)
         self._observation = self.DeclareAbstractInputPort(
             "image_observation", AbstractValue.Make(ImageObservationMessage()))
+        # The message on image_observation, evaluated only when it changed: the update
+        # asks whether this entry is out of date (much cheaper than reading the port at
+        # every reading). A context's wholesale reset (SetTimeStateAndParametersFrom)
+        # notes the parameters changed, so the update reads the port again after one.
+        self._observation_seen = self.DeclareCacheEntry(
+            "image_observation_seen", ValueProducer(
+                allocate=AbstractValue.Make(ImageObservationMessage()).Clone,
+                calc=lambda c, v: v.set_value(self._observation.EvalAbstract(c).get_value())),
+            {self._observation.ticket(), self.accuracy_ticket()})
         self._frames = {name: self.DeclareAbstractInputPort(
             f"{prefix}depth_frame", AbstractValue.Make(DepthFrame.empty()))
             for name, prefix in prefixes.items()}
@@ -220,8 +236,10 @@ class DelayBufferSystem(LeafSystem):
         if s.readings.is_new(raw):
             changed = True
             self._take_reading(raw, self._position.Eval(context), s)  # Eval gives a copy
-        message = self._observation.EvalAbstract(context).get_value()
-        if message.id > s.last_observation_id and message.observation is not None:
+        seen = self._observation_seen
+        message = seen.Eval(context) if seen.is_out_of_date(context) else None
+        if (message is not None and message.id > s.last_observation_id
+                and message.observation is not None):
             changed = True
             s.last_observation_id = message.id
             self._take_observation(message, s)
