@@ -134,7 +134,10 @@ class DelayBufferSystem(LeafSystem):
     With ``cameras`` (names of the model's cameras) each camera has its own
     ``<name>_depth_frame`` input and ``<name>_image_prior`` output, and its images go
     through their own clock (named ``image (<name>)``) into the one buffer, each at its
-    own time; ``image_observation`` takes every camera's observations.
+    own time; ``image_observation`` takes every camera's observations. That port is read
+    when its value changed (or the context's time, state and parameters were set back):
+    this system's state alone set back, the port unchanged, does not take its message
+    again.
     """
 
     def __init__(self, *, model: TrackerModel, params: TrackerParams | ResolvedParams,
@@ -157,9 +160,9 @@ class DelayBufferSystem(LeafSystem):
         self._observation = self.DeclareAbstractInputPort(
             "image_observation", AbstractValue.Make(ImageObservationMessage()))
         # The message on image_observation, evaluated only when it changed: the update
-        # asks whether this entry is out of date (much cheaper than reading the port at
-        # every reading). A context's wholesale reset (SetTimeStateAndParametersFrom)
-        # notes the parameters changed, so the update reads the port again after one.
+        # asks whether this entry is out of date (cheaper than reading the port at every
+        # reading). A context set back (SetTimeStateAndParametersFrom, which copies the
+        # accuracy too) notes the accuracy changed: the update reads the port again.
         self._observation_seen = self.DeclareCacheEntry(
             "image_observation_seen", ValueProducer(
                 allocate=AbstractValue.Make(ImageObservationMessage()).Clone,
