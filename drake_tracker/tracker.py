@@ -134,7 +134,7 @@ class Tracker:
             if not start_reading_ok(reading, self.readings.warnings):
                 return False
             self.buffer = new_belief_buffer(self.params, t, reading)
-        self.buffer.add_reading(t, full_reading(self.params, reading))
+        self.buffer.add_reading(t, full_reading(self.params, reading), checked=True)
         return True
 
     @property

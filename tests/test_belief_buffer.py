@@ -219,7 +219,9 @@ def _state(buf):
 def test_copies_that_share_their_log_go_on_as_buffers_fed_alone(seed):
     """Copies share one log (appends in place, copy on any other change, compaction of
     the pruned events): whatever the order in which copies are made, fed readings and
-    images, each holds exactly what a buffer fed its own events alone holds."""
+    images, each holds exactly what a buffer fed its own events alone holds (the copies
+    take their readings as the delay buffer system gives them, ``checked``; the buffers
+    alone check theirs)."""
     rng = np.random.default_rng(seed)
     bank = _bank()
     start = initial_moments(np.zeros(N), np.full(N, 0.1), np.full(N, 0.05),
@@ -242,7 +244,7 @@ def test_copies_that_share_their_log_go_on_as_buffers_fed_alone(seed):
                 y = rng.normal(0.25, 0.02, N)
                 copy.add_image(t_image, _linear_image_update(y, 1e-4))
                 histories[j].append(("image", t_image, y))
-            copy.add_reading(t, q)
+            copy.add_reading(t, q.copy(), checked=True)  # as the system gives it
             histories[j].append(("reading", t, q))
             lineages[j] = copy
         if k % 250 == 249 or k == 2999:

@@ -243,3 +243,55 @@ def test_check_reading_answers_as_its_plain_numpy_reference():
                 bank.check_reading(given)
         else:
             np.testing.assert_array_equal(bank.check_reading(given), expected)
+
+
+def test_compiled_step_answers_as_its_plain_numpy_reference():
+    """The compiled step (``step_unchecked``, and ``step_in_place`` on the Kalman bank
+    system's own copy) against plain numpy: predict, cap the joints without a value,
+    update the others; on seeded beliefs and readings with NaN, a zero time step and a
+    bank whose σb² was changed (one coefficient array)."""
+    rng = np.random.default_rng(45)
+    n = 6
+    params = _params(n, rng)
+    cap = rng.uniform(0.01, 0.2, n)
+    bank = JointKalmanBank(params, missing_angle_var=cap).with_bias_process_var(
+        rng.uniform(0.0, 1e-4, n))
+    sa2, sb2 = params.angle_process_std ** 2, bank.bias_process_var
+    log_c, sq2 = np.log(params.bias_decay_per_s), params.encoder_noise_std ** 2
+
+    def reference(m, dt, q):
+        m = m.copy()
+        if dt > 0:
+            cd = np.exp(log_c * dt)
+            m[MEAN_B] *= cd
+            m[VAR_A] += dt * sa2
+            m[COV_AB] *= cd
+            m[VAR_B] = cd * cd * m[VAR_B] + dt * sb2
+        missing = np.isnan(q) & (m[VAR_A] > cap)
+        bound = np.sqrt(cap * m[VAR_B])
+        m[VAR_A] = np.where(missing, cap, m[VAR_A])
+        m[COV_AB] = np.where(missing, np.clip(m[COV_AB], -bound, bound), m[COV_AB])
+        saa, sab, sbb = m[VAR_A].copy(), m[COV_AB].copy(), m[VAR_B].copy()
+        s = saa + 2.0 * sab + sbb + sq2
+        ka, kb = (saa + sab) / s, (sab + sbb) / s
+        nu = q - m[MEAN_A] - m[MEAN_B]
+        has = ~np.isnan(q)
+        m[MEAN_A] = np.where(has, m[MEAN_A] + ka * nu, m[MEAN_A])
+        m[MEAN_B] = np.where(has, m[MEAN_B] + kb * nu, m[MEAN_B])
+        m[VAR_A] = np.where(has, np.maximum(saa - ka * ka * s, 0.0), m[VAR_A])
+        m[COV_AB] = np.where(has, sab - ka * kb * s, m[COV_AB])
+        m[VAR_B] = np.where(has, np.maximum(sbb - kb * kb * s, 0.0), m[VAR_B])
+        return m
+
+    m = initial_moments(rng.normal(size=n), np.full(n, 0.5), np.full(n, 0.1), params.has_bias)
+    for k in range(300):
+        dt = 0.0 if k % 50 == 0 else float(rng.uniform(0.0005, 0.05))
+        q = rng.normal(size=n)
+        q[rng.random(n) < 0.2] = np.nan
+        expected = reference(m, dt, q)
+        stepped = bank.step_unchecked(m, dt, q)
+        np.testing.assert_allclose(stepped, expected, rtol=1e-12, atol=1e-15)
+        in_place = m.copy()
+        bank.step_in_place(in_place, dt, q)
+        np.testing.assert_array_equal(in_place, stepped)
+        m = stepped

@@ -48,6 +48,40 @@ def test_delay_buffer_system_reports_why_an_image_has_no_prior(apollo):
     assert "future" in system.GetOutputPort("image_prior").Eval(context).problem
 
 
+def test_the_buffer_takes_an_observation_once_and_again_after_a_rewound_context(apollo):
+    """The buffer reads ``image_observation`` only when its value changed (a cache entry
+    on the port): a message is taken once; a context set back to before it (its fixed
+    port unchanged) takes it again, as a fresh run would."""
+    from drake_tracker.core.filter.angle_observation import AngleObservation
+    from drake_tracker.core.filter.kalman import MEAN_A, VAR_A
+
+    system = DelayBufferSystem(model=apollo, params=params(), period_s=0.01)
+    context = system.CreateDefaultContext()
+    port = system.GetInputPort("image_observation")
+    port.FixValue(context, ImageObservationMessage())
+    system.GetInputPort("depth_frame").FixValue(context, DepthFrame.empty())
+    system.GetInputPort("measured_position").FixValue(
+        context, np.zeros(len(apollo.robot_joint_names)))
+    simulator = Simulator(system, context)
+    for k in range(5):  # five readings
+        system.GetInputPort("measurement_time").FixValue(context, [0.01 * k])
+        simulator.AdvanceTo(0.01 * k + 0.005)
+    saved = context.Clone()
+    anchor = system.state(context).buffer.image_anchor(0.02)
+    observation = AngleObservation.from_posterior(
+        anchor.prior, anchor.prior[MEAN_A] + 0.01, 0.5 * anchor.prior[VAR_A])
+    port.FixValue(context, ImageObservationMessage(1, 0, 0.02, observation, anchor))
+    taken = []
+    for _ in range(2):
+        simulator.AdvanceTo(context.get_time() + 0.01)
+        state = system.state(context)
+        taken.append((state.last_observation_id, state.correction.id))
+        context.SetTimeStateAndParametersFrom(saved)
+        simulator.Initialize()
+        assert system.state(context).last_observation_id == 0
+    assert taken == [(1, 1), (1, 1)]
+
+
 def _simulate(apollo, run, p, h):
     builder = DiagramBuilder()
     source = builder.AddSystem(RecordedRunSource(run))

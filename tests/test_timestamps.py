@@ -292,3 +292,36 @@ def test_the_usual_samples_fast_path_decides_as_the_full_check():
         kinds[decision.kind or ("re-anchored" if decision.reanchored_by_s else "usual")] += 1
     assert kinds["usual"] > 2000 and kinds["re-anchored"] >= 1, kinds
     assert kinds["stamps far in the future"] and kinds["stamps behind the latest"], kinds
+
+
+def test_the_gates_value_check_answers_as_its_plain_numpy_reference():
+    """``ReadingGate.admit`` tells a usable reading by one sum of plain floats; against
+    the plain numpy check joint by joint (usable: finite and within ±1e6), on seeded
+    readings with NaN, ±inf, values beyond ±1e6 and usable ones whose sum is beyond it:
+    the same admitted values (NaN where unusable), the same skips and counts."""
+    from drake_tracker.core.sensors.reading_gate import MAX_READING_MAGNITUDE, ReadingGate
+
+    rng = np.random.default_rng(45)
+    names = [f"j{k}" for k in range(4)]
+    gate = ReadingGate(TimestampParams(), names, logger=None)
+    skipped = partial = 0
+    for k in range(3000):
+        values = rng.normal(0.0, 1.0, 4)
+        kinds = rng.integers(0, 12, 4)
+        values[kinds == 0] = np.nan
+        values[kinds == 1] = np.inf * rng.choice([-1, 1])
+        values[kinds == 2] = 2e6 * rng.choice([-1, 1])
+        values[kinds == 3] = 0.9e6 * rng.choice([-1, 1])  # usable; the sum is beyond
+        if rng.random() < 0.05:
+            values[:] = np.nan
+        usable = np.abs(values) <= MAX_READING_MAGNITUDE
+        t = gate.admit(0.001 * k, values)
+        if not usable.any():
+            assert t is None
+            skipped += 1
+            continue
+        assert t == pytest.approx(0.001 * k)
+        np.testing.assert_array_equal(gate.values, np.where(usable, values, np.nan))
+        partial += not usable.all()
+    assert gate.warnings.counts["non-finite readings"] == skipped > 0
+    assert gate.warnings.counts["readings with missing joints"] == partial > 0

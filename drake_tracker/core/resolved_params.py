@@ -11,6 +11,7 @@ parameters again.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -94,13 +95,15 @@ class ResolvedParams:
         raise ValueError(f"unknown camera '{camera}': the parameters were resolved for "
                          f"the cameras {[name for name, _ in self.camera_blocks]}")
 
-    @property
+    # Cached (plain attributes after the first use): ``full_reading`` reads both at
+    # every joint reading.
+    @cached_property
     def robot_joint_indices(self) -> np.ndarray:
         """Indices of the robot (measured) joints within ``joints.names`` (the name
         ``TrackerModel`` uses)."""
         return self.joints.robot_indices
 
-    @property
+    @cached_property
     def num_joints(self) -> int:
         """Number of joints the tracker estimates (robot and virtual)."""
         return len(self.joints.names)

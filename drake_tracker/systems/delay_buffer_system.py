@@ -8,7 +8,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
+from pydrake.systems.framework import (
+    Context,
+    EventStatus,
+    InputPort,
+    LeafSystem,
+    OutputPort,
+    ValueProducer,
+)
 
 from drake_tracker.core.cameras import camera_named
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
@@ -127,7 +134,10 @@ class DelayBufferSystem(LeafSystem):
     With ``cameras`` (names of the model's cameras) each camera has its own
     ``<name>_depth_frame`` input and ``<name>_image_prior`` output, and its images go
     through their own clock (named ``image (<name>)``) into the one buffer, each at its
-    own time; ``image_observation`` takes every camera's observations.
+    own time; ``image_observation`` takes every camera's observations. That port is read
+    when its value changed (or the context's time, state and parameters were set back):
+    this system's state alone set back, the port unchanged, does not take its message
+    again.
     """
 
     def __init__(self, *, model: TrackerModel, params: TrackerParams | ResolvedParams,
@@ -149,6 +159,15 @@ class DelayBufferSystem(LeafSystem):
         self._time = self.DeclareVectorInputPort("measurement_time", 1)
         self._observation = self.DeclareAbstractInputPort(
             "image_observation", AbstractValue.Make(ImageObservationMessage()))
+        # The message on image_observation, evaluated only when it changed: the update
+        # asks whether this entry is out of date (cheaper than reading the port at every
+        # reading). A context set back (SetTimeStateAndParametersFrom, which copies the
+        # accuracy too) notes the accuracy changed: the update reads the port again.
+        self._observation_seen = self.DeclareCacheEntry(
+            "image_observation_seen", ValueProducer(
+                allocate=AbstractValue.Make(ImageObservationMessage()).Clone,
+                calc=lambda c, v: v.set_value(self._observation.EvalAbstract(c).get_value())),
+            {self._observation.ticket(), self.accuracy_ticket()})
         self._frames = {name: self.DeclareAbstractInputPort(
             f"{prefix}depth_frame", AbstractValue.Make(DepthFrame.empty()))
             for name, prefix in prefixes.items()}
@@ -156,7 +175,8 @@ class DelayBufferSystem(LeafSystem):
         self._index = int(self._state)  # pydrake takes a plain int fastest
         self._reading_out = self.DeclareAbstractOutputPort(
             "reading", lambda: AbstractValue.Make(AdmittedReading()),
-            lambda c, o: o.set_value(self.state(c).reading), state)
+            lambda c, o: o.set_value(c.get_abstract_state(self._index).get_value().reading),
+            state)
         self._correction_out = self.DeclareAbstractOutputPort(
             "correction", lambda: AbstractValue.Make(BeliefCorrection()),
             lambda c, o: o.set_value(self.state(c).correction), state)
@@ -207,17 +227,22 @@ class DelayBufferSystem(LeafSystem):
         return context.get_abstract_state(self._index).get_value()
 
     def _update(self, context: Context, state) -> EventStatus | None:
-        s = self.state(context).copy()  # the stored one is shared with Drake's copies
+        # The stored state is shared with Drake's copies: the update changes its own copy.
+        s = context.get_abstract_state(self._index).get_value().copy()
         # Frames are judged against the buffer the CPF system saw (before this reading).
-        changed = False
+        changed = False  # (EvalAbstract(c).get_value(): an abstract port's Eval, cheaper)
         for name, port in self._frames.items():
-            changed |= self._judge_frame(name, port.Eval(context), s)
+            frame = port.EvalAbstract(context).get_value()
+            if frame is not s.cameras[name].frame:  # not the frame judged last
+                changed |= self._judge_frame(name, frame, s)
         raw = self._time.EvalBasicVector(context)[0]
         if s.readings.is_new(raw):
             changed = True
             self._take_reading(raw, self._position.Eval(context), s)  # Eval gives a copy
-        message = self._observation.Eval(context)
-        if message.id > s.last_observation_id and message.observation is not None:
+        seen = self._observation_seen
+        message = seen.Eval(context) if seen.is_out_of_date(context) else None
+        if (message is not None and message.id > s.last_observation_id
+                and message.observation is not None):
             changed = True
             s.last_observation_id = message.id
             self._take_observation(message, s)
@@ -246,7 +271,7 @@ class DelayBufferSystem(LeafSystem):
             s.buffer = new_belief_buffer(p, t, values)
         else:
             s.buffer = s.buffer.copy()
-        s.buffer.add_reading(t, full_reading(p, values))
+        s.buffer.add_reading(t, full_reading(p, values), checked=True)
         s.last_reading_time_s = t
         s.reading = AdmittedReading(s.reading.id + 1, t, values, restarted, s.correction.id)
 
@@ -267,7 +292,7 @@ class DelayBufferSystem(LeafSystem):
     def _judge_frame(self, camera: str, frame: DepthFrame, s: DelayBufferState) -> bool:
         """Step 1, once per new frame of ``camera``; whether there was one."""
         judged = s.cameras[camera]
-        if frame is judged.frame or frame.is_empty or s.buffer is None:
+        if frame.is_empty or s.buffer is None:
             return False
         key = frame_key(frame)
         if key == judged.key:

@@ -190,46 +190,51 @@ class JointKalmanBankSystem(LeafSystem):
         return self._bank
 
     def _update(self, context: Context, discrete_state) -> EventStatus | None:
-        s = self.bookkeeping(context)
-        reading = self._reading.Eval(context)
+        # ``discrete_state`` holds a copy of the state (Drake's, for this update): its
+        # groups are changed in place, through views, with no message rebuilt per reading.
+        belief_group, book_group, bias_group = self._groups
+        book = discrete_state.get_mutable_value(book_group)
+        time_s, last_reading_s, correction_id, reading_id = book.tolist()  # NaN: None
+        reading = self._reading.EvalAbstract(context).get_value()  # Eval's value, cheaper
         adopt = False
-        if reading.correction_id is None or reading.correction_id > s.correction_id:
+        if reading.correction_id is None or reading.correction_id > correction_id:
             # The buffer tells the id of its latest correction with each reading: the
             # correction port is read only when there is a new one (or no word of it).
             correction = self._correction.Eval(context)
-            adopt = correction.id > s.correction_id and correction.belief is not None
-        new_reading = self._params.use_joint_readings and reading.id > s.reading_id
+            adopt = correction.id > correction_id and correction.belief is not None
+        new_reading = self._params.use_joint_readings and reading.id > reading_id
         if not (adopt or new_reading):
             return EventStatus.DidNothing()  # Drake keeps the state as it is
-        belief = self.belief(context)
+        belief = discrete_state.get_mutable_value(belief_group).reshape(5, self._n)  # a view
         if adopt:
-            belief = correction.belief.copy()
-            s.time_s, s.last_reading_s = correction.time_s, correction.last_reading_time_s
-            s.correction_id = correction.id
+            belief[:] = correction.belief
+            time_s, last_reading_s = correction.time_s, correction.last_reading_time_s
+            correction_id = correction.id
             if correction.bias_process_var is not None:
-                discrete_state.set_value(self._groups[2], correction.bias_process_var)
+                discrete_state.set_value(bias_group, correction.bias_process_var)
         if new_reading:
-            s.reading_id = reading.id
-            belief = self._filter(s, reading, belief, discrete_state)
-        discrete_state.set_value(self._groups[0], belief.ravel())
-        discrete_state.set_value(self._groups[1], s.to_vector())
+            reading_id = reading.id
+            time_s, last_reading_s = self._filter(reading, time_s, last_reading_s, belief,
+                                                  discrete_state.get_value(bias_group))
+        # (item by item: a slice set from a tuple costs twice as much)
+        book[0], book[1], book[2], book[3] = time_s, last_reading_s, correction_id, reading_id
         return None
 
-    def _filter(self, s: KalmanBankState, reading: AdmittedReading,
-                belief: np.ndarray, state) -> np.ndarray:
-        """The belief after an admitted reading (eqs. 3-5 of ``docs/method.md``)."""
+    def _filter(self, reading: AdmittedReading, time_s: float, last_reading_s: float,
+                belief: np.ndarray, bias_process_var: np.ndarray) -> tuple[float, float]:
+        """Filters an admitted reading into ``belief`` in place (eqs. 3-5 of
+        ``docs/method.md``); returns the belief's time and its latest reading's (NaN:
+        none), as :class:`KalmanBankState` holds them."""
         t = reading.time_s
         if reading.restarted:  # the clock restarted: start again from this reading
-            s.time_s = s.last_reading_s = None
-        if s.last_reading_s is not None and t <= s.last_reading_s:
-            return belief  # the adopted correction holds it already
-        if s.time_s is None:
-            belief, s.time_s = initial_belief(self._params, reading.values), t
-        bank = self._bank_for(state.get_value(self._groups[2]))
-        belief = bank.step_unchecked(belief, t - s.time_s,
-                                     full_reading(self._params, reading.values))
-        s.time_s = s.last_reading_s = t
-        return belief
+            time_s = last_reading_s = np.nan
+        if t <= last_reading_s:  # False for NaN
+            return time_s, last_reading_s  # the adopted correction holds it already
+        if time_s != time_s:  # NaN: no belief yet
+            belief[:], time_s = initial_belief(self._params, reading.values), t
+        self._bank_for(bias_process_var).step_in_place(
+            belief, t - time_s, full_reading(self._params, reading.values))
+        return t, t
 
     def CalcCameraOffset(self, context: Context, output: BasicVector) -> None:
         """The six virtual camera joints' angles."""

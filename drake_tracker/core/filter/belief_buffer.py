@@ -177,8 +177,13 @@ class BeliefBuffer:
             self._now = float(t)
             self._prune()
 
-    def add_reading(self, t: float, reading: np.ndarray) -> np.ndarray:
-        """Filters a reading stamped ``t`` (after every earlier one); returns the new belief."""
+    def add_reading(self, t: float, reading: np.ndarray, *, checked: bool = False
+                    ) -> np.ndarray:
+        """Filters a reading stamped ``t`` (after every earlier one); returns the new belief.
+        ``checked``: ``reading`` is a float (n,) array that passed the readings' gate
+        (``ReadingGate.admit``: NaN for a joint without a value, no infinity, some value)
+        and is the buffer's to keep (e.g. ``full_reading``'s new array): it is stored as
+        it is, where any other is checked (``JointKalmanBank.check_reading``) and copied."""
         if not math.isfinite(t):
             raise ValueError(f"joint reading time stamp is not finite: {t}")
         if t <= self._last_reading_time:
@@ -186,13 +191,25 @@ class BeliefBuffer:
                 f"joint reading stamped {t} s is not after the previous one "
                 f"({self._last_reading_time} s)")
         t = float(t)
-        reading = self.bank.check_reading(reading).copy()
-        k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
-        k = self._insert(k, _Event(t, reading=reading),
-                         self.bank.step_unchecked(belief, float(t - t0), reading))
+        if not checked:
+            reading = self.bank.check_reading(reading).copy()
         self._last_reading_time = t
-        if k < self._end - 1:
-            self._replay_from(k + 1)
+        log, end = self._log, self._end
+        if self._start < end == len(log.times) and log.times[end - 1] <= t:
+            # The usual reading, after every event: appended to the log in place, as
+            # ``_insert`` would, without the searches (1000 times a second).
+            belief = self.bank.step_unchecked(log.beliefs[end - 1],
+                                              float(t - log.times[end - 1]), reading)
+            log.events.append(_Event(t, reading=reading))
+            log.beliefs.append(belief)
+            log.times.append(t)
+            self._end = end + 1
+        else:
+            k, t0, belief = self._latest_at_or_before(t)  # t0 <= t: checked, as ``step`` would
+            k = self._insert(k, _Event(t, reading=reading),
+                             self.bank.step_unchecked(belief, float(t - t0), reading))
+            if k < self._end - 1:
+                self._replay_from(k + 1)
         self._now = max(self._now, t)
         self._prune()
         return self._log.beliefs[self._end - 1]
@@ -361,9 +378,12 @@ class BeliefBuffer:
                 log.beliefs[i] = event.observation.apply(self.bank.predict(previous, dt))
 
     def _prune(self) -> None:
-        log = self._log
+        log, start = self._log, self._start
         cutoff = self._now - self.horizon_s
-        drop = bisect.bisect_left(log.times, cutoff, self._start, self._end) - self._start
+        if start + 1 < self._end and log.times[start] < cutoff <= log.times[start + 1]:
+            drop = 1  # the usual: one reading in, the oldest out (no search)
+        else:
+            drop = bisect.bisect_left(log.times, cutoff, start, self._end) - start
         # Keep at least the newest event so the present belief stays stored.
         drop = min(drop, self._end - self._start - 1)
         if drop > 0:

@@ -20,6 +20,8 @@ import numba
 import numpy as np
 
 MEAN_A, MEAN_B, VAR_A, COV_AB, VAR_B = range(5)
+#: Rows of a bank's coefficients (``JointKalmanBank._coef``).
+_SA2, _SB2, _LOG_C, _SQ2, _CAP = range(5)
 
 
 @dataclass(frozen=True)
@@ -135,11 +137,14 @@ def _cap_missing_inplace(m, q, cap):
 
 
 @numba.njit(cache=True)
-def _step_inplace(m, dt, q, sa2, sb2, log_c, sq2, cap):
+def _step_inplace(m, dt, q, coef):
+    """Predict by ``dt``, then update with ``q``; ``coef`` is the bank's (5, n) rows
+    σa², σb², log c, σq² and the missing joints' cap (one array: each argument of a
+    compiled call costs, most when the caches are cold, as at 1000 readings a second)."""
     if dt > 0.0:
-        _predict_inplace(m, dt, sa2, sb2, log_c)
-    _cap_missing_inplace(m, q, cap)
-    _update_inplace(m, q, sq2)
+        _predict_inplace(m, dt, coef[_SA2], coef[_SB2], coef[_LOG_C])
+    _cap_missing_inplace(m, q, coef[_CAP])
+    _update_inplace(m, q, coef[_SQ2])
 
 
 class JointKalmanBank:
@@ -156,12 +161,18 @@ class JointKalmanBank:
     def __init__(self, params: KalmanBankParams, missing_angle_var: np.ndarray | None = None):
         self.params = params
         n = params.num_joints
-        self._cap = (np.full(n, np.inf) if missing_angle_var is None
-                     else np.asarray(missing_angle_var, float).reshape(n).copy())
-        self._sa2 = np.asarray(params.angle_process_std, float) ** 2
-        self._sb2 = params.effective_bias_std().astype(float) ** 2
-        self._log_c = np.log(np.asarray(params.bias_decay_per_s, float))
-        self._sq2 = np.asarray(params.encoder_noise_std, float) ** 2
+        self._coef = np.empty((5, n))
+        self._coef[_CAP] = (np.inf if missing_angle_var is None
+                            else np.asarray(missing_angle_var, float).reshape(n))
+        self._coef[_SA2] = np.asarray(params.angle_process_std, float) ** 2
+        self._coef[_SB2] = params.effective_bias_std().astype(float) ** 2
+        self._coef[_LOG_C] = np.log(np.asarray(params.bias_decay_per_s, float))
+        self._coef[_SQ2] = np.asarray(params.encoder_noise_std, float) ** 2
+        self._views()
+
+    def _views(self) -> None:
+        """The rows of ``_coef`` by name."""
+        self._sa2, self._sb2, self._log_c, self._sq2, self._cap = self._coef
 
     @property
     def num_joints(self) -> int:
@@ -181,7 +192,9 @@ class JointKalmanBank:
             raise ValueError(f"bias process variances must be finite and >= 0, got {var}")
         bank = object.__new__(JointKalmanBank)
         bank.__dict__.update(self.__dict__)
-        bank._sb2 = var.copy()
+        bank._coef = self._coef.copy()
+        bank._coef[_SB2] = var
+        bank._views()
         return bank
 
     def check_reading(self, reading: np.ndarray) -> np.ndarray:
@@ -223,16 +236,19 @@ class JointKalmanBank:
         if dt < 0:
             raise ValueError(f"cannot predict backwards in time (dt = {dt} s)")
         out = moments.copy()
-        _step_inplace(out, float(dt), self.check_reading(reading), self._sa2, self._sb2,
-                      self._log_c, self._sq2, self._cap)
+        _step_inplace(out, float(dt), self.check_reading(reading), self._coef)
         return out
 
     def step_unchecked(self, moments: np.ndarray, dt: float, reading: np.ndarray) -> np.ndarray:
         """``step`` for readings that were already checked (replays of the buffer)."""
         out = moments.copy()
-        _step_inplace(out, dt, reading, self._sa2, self._sb2, self._log_c, self._sq2,
-                      self._cap)
+        _step_inplace(out, dt, reading, self._coef)
         return out
+
+    def step_in_place(self, moments: np.ndarray, dt: float, reading: np.ndarray) -> None:
+        """``step_unchecked`` into ``moments`` itself, a writeable (5, n) float array that
+        nothing else holds (the Kalman bank system's copy of its discrete state)."""
+        _step_inplace(moments, dt, reading, self._coef)
 
 
 def recombine_with_bias(moments: np.ndarray, mean_post: np.ndarray,

@@ -73,7 +73,9 @@ class ReadingGate:
         """An independent copy that shares the logger and joint names (see StreamClock's),
         and its warnings until either uses them (they change only on a problem): the
         delay buffer's LeafSystem copies its gate at every reading."""
-        clone = self._with(self.clock.copy(), self._warnings)
+        clone = object.__new__(ReadingGate)
+        clone.__dict__.update(self.__dict__)
+        clone.clock = self.clock.copy()
         self._shared_warnings = clone._shared_warnings = True
         return clone
 
@@ -87,8 +89,10 @@ class ReadingGate:
         return clone
 
     def is_new(self, raw_s: float) -> bool:
-        """Whether a stamp held on a port is a new sample (differs from the last seen)."""
-        return is_new_stamp(raw_s, self.last_raw_s)
+        """Whether a stamp held on a port is a new sample (differs from the last seen):
+        ``is_new_stamp``, asked at every tick of the delay buffer system."""
+        raw, last = float(raw_s), self.last_raw_s  # a float: ``admit`` sets it
+        return not (raw == last or (raw != raw and last != last))
 
     def admit(self, raw_s: float, values: np.ndarray) -> float | None:
         """The reading's time in the tracker's time base, or None (skipped, logged). A
@@ -100,16 +104,15 @@ class ReadingGate:
         self.last_raw_s = raw_s
         self.restarted = False
         self.values = values = np.asarray(values, float)
-        # NaN, ±inf, absurd values: a plain loop over the few joints is the fast check.
         partial: tuple[str, ...] = ()
-        if not all(abs(v) <= MAX_READING_MAGNITUDE for v in np.ravel(values).tolist()):
+        # NaN, ±inf, absurd values: the usual reading has none, which one sum of plain
+        # floats tells (a NaN makes it NaN; a sum within the bound bounds each value, a
+        # rounded sum of magnitudes being at least each); else, joint by joint.
+        if not sum(map(abs, values.ravel().tolist())) <= MAX_READING_MAGNITUDE:
             with np.errstate(invalid="ignore"):
                 bad = ~(np.abs(values) <= MAX_READING_MAGNITUDE)
             names = tuple(n for n, b in zip(self.joint_names, bad, strict=True) if b)
-            if not bad.all():  # some joints have a value: those are used
-                partial = names
-                self.values = np.where(bad, np.nan, values)
-            else:
+            if bad.all():
                 if self.gap_start_s is None:
                     self.gap_start_s = float(raw_s)
                     if self.logger:
@@ -121,6 +124,9 @@ class ReadingGate:
                 self.gap_readings += 1
                 self.warnings.count("non-finite readings")
                 return None
+            if names:  # some joints have a value: those are used
+                partial = names
+                self.values = np.where(bad, np.nan, values)
         decision = None
         t = self.clock.accept_usual(raw_s)  # the usual sample: no StampDecision made
         if t is None:
