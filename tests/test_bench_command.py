@@ -16,7 +16,7 @@ def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):
     for key in ("machine", "robots", "image_updates_per_s_2000_1_thread",
                 "image_updates_per_s_2000_2_threads", "cad_over_bench_cost_per_evaluation",
                 "image_updates_per_s_default", "kf_step_us", "replay_us_per_reading",
-                "demo", "tracker_alone", "reading_path", "decision"):
+                "demo", "tracker_alone", "tracker_alone_paced", "reading_path", "decision"):
         assert key in result, key
     assert set(result["machine"]) >= {"llvm_cpu", "avx512f", "numba_threading_layer"}
     bench, cad = result["robots"]["apollo"], result["robots"]["apollo_cad"]
@@ -32,6 +32,10 @@ def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):
         assert robot["depth_p95_mm_vs_drake"] <= 10.0
     assert result["image_updates_per_s_2000_1_thread"] > 0
     assert result["demo"]["real_time_factor"] > 0
+    paced = result["tracker_alone_paced"]  # held to real time: no faster than it
+    assert set(paced) == {"defaults", "every_frame"}
+    assert all(p["paced"] and p["real_time_factor_after_1s"] < 1.05 for p in paced.values())
+    assert paced["every_frame"]["min_image_interval_s"] == 0.0
     cases = result["decision"]["cases"]  # the demo's scenario and the suite's hard cases
     assert len(cases) == 4 and all(c["images"] > 0 and c["update_s"] > 0 for c in cases.values())
     pooled = sum(c["decision_s"] for c in cases.values()) / sum(

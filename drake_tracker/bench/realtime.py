@@ -65,9 +65,14 @@ def bench_demo(params: TrackerParams, duration_s: float) -> dict:
 
 
 def bench_tracker_alone(params: TrackerParams, duration_s: float,
-                        recording: tuple[Scenario, RecordedRun] | None = None) -> dict:
+                        recording: tuple[Scenario, RecordedRun] | None = None,
+                        paced: bool = False) -> dict:
     """The tracker's Diagram alone on the demo's recorded sensors (see the module doc);
-    ``recording``: :func:`record_demo_sensors`'s, else made here."""
+    ``recording``: :func:`record_demo_sensors`'s, else made here. ``paced``: the
+    Simulator is held to real time (``set_target_realtime_rate(1)``), as on a robot,
+    where the sensors' clock is the wall clock: an update late at its deadline
+    (``image.update_latency_s`` after its image) then took longer than that in wall time;
+    unpaced, the Simulator runs ahead as fast as it can and waits at every deadline."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
 
@@ -87,6 +92,8 @@ def bench_tracker_alone(params: TrackerParams, duration_s: float,
     marks = []  # filled by add_second_marks
     add_second_marks(builder, marks)
     simulator = Simulator(builder.Build())
+    if paced:
+        simulator.set_target_realtime_rate(1.0)
     simulator.AdvanceTo(run.duration_s)
     end = (time.perf_counter(), time.thread_time(), time.process_time())
     start = next(m for m in marks if m[0] == 1.0)
@@ -96,7 +103,8 @@ def bench_tracker_alone(params: TrackerParams, duration_s: float,
     updates = list(cpf.processor.update.times.per_update)
     main_cpu = (end[1] - start[2]) / span
     waits = cpf.deadline_waits
-    return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s,
+    return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s, "paced": paced,
+            "min_image_interval_s": params.image.min_image_interval_s,
             "real_time_factor_after_1s": span / (end[0] - start[1]),
             "main_thread_cpu_s_per_s": main_cpu,
             "other_threads_cpu_s_per_s": (end[2] - start[3]) / span - main_cpu,

@@ -41,6 +41,10 @@ Keys of ``bench.json``:
   update's worker), images applied per second, the median wall time of an update, and
   how many updates were not done at their deadline (``CpfImageUpdateSystem.
   deadline_waits``) with the Simulator's wait per simulated second;
+* ``tracker_alone_paced``: the same held to real time, as on a robot (``defaults``, and
+  ``every_frame`` with ``image.min_image_interval_s`` 0: every frame of the camera, at
+  ``demo_camera_rate_hz``): its late updates took longer than ``image.update_latency_s``
+  of wall time;
 * ``reading_path``: what each joint reading costs the Simulator's thread in a Diagram,
   on the same recorded sensors (:mod:`drake_tracker.bench.readings`);
 * ``cameras``: an image update's cost, one camera at 30 Hz vs two at 15 Hz (``bench/cameras.py``);
@@ -158,6 +162,10 @@ def run_benchmarks(quick: bool = False) -> dict:
     demo = bench_demo(params, 2.0 if quick else 4.0)
     recording = record_demo_sensors(params, 3.0 if quick else 6.0)
     alone = bench_tracker_alone(params, recording[1].duration_s, recording)
+    every_frame = TrackerParams()
+    every_frame.image.min_image_interval_s = 0.0
+    paced = {name: bench_tracker_alone(p, recording[1].duration_s, recording, paced=True)
+             for name, p in (("defaults", params), ("every_frame", every_frame))}
     readings = bench_recorded_reading_path(params, recording, quick)
     cameras = bench_camera_count(params, 2.0 if quick else 4.0)
     decision = bench_decision(3.0 if quick else 10.0)
@@ -183,6 +191,8 @@ def run_benchmarks(quick: bool = False) -> dict:
         "replay_us_per_reading": kalman["replay_us_per_reading"],
         "demo": demo,
         "tracker_alone": alone,
+        "tracker_alone_paced": paced,
+        "demo_camera_rate_hz": recording[0].camera.rate_hz,
         "reading_path": readings,
         "cameras": cameras,
         "decision": decision,
@@ -267,6 +277,10 @@ def format_bench(result: dict) -> str:
     ]
     lines.append(format_demo(result["demo"]))
     lines.append(format_tracker_alone(result["tracker_alone"]))
+    for name, paced in result["tracker_alone_paced"].items():
+        lines.append(f"held to real time, {name.replace('_', ' ')} "
+                     f"(camera {result['demo_camera_rate_hz']:g} Hz): "
+                     + format_tracker_alone(paced))
     lines += [format_reading_path(result["reading_path"]), format_camera_count(result["cameras"]),
               format_decision(result["decision"])]
     return "\n".join(lines)
