@@ -103,7 +103,7 @@ def best_health(channels: dict[str, CameraChannel]) -> TrackerHealth:
     otherwise that of the camera in the best state, at best ``uncertain``. Another
     camera that tracks the arm confirms the hand, not the first camera's pose (its
     offset, and the joints that carry it), which only its own images observe: measured
-    on the quick suite's in-out-in-2cam/constant seed 3, the first camera saw no arm
+    on the quick suite's in-out-in-2cam/constant seed 3 at b598ba4, the first camera saw no arm
     while the other tracked it, and the hand was 85-119 mm off in the first camera's
     frame with the best camera's health saying ``tracking``. One camera: its health."""
     first = next(iter(channels.values()))

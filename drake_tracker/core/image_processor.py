@@ -125,7 +125,8 @@ class ImageProcessor:
         #: Which of the model's cameras (its random streams: ``image_rng``).
         self.camera_index = 0
         #: Whether the model has other cameras, which may hold the arm while this one
-        #: does not see it (``observe``: such an image is not applied).
+        #: does not see it (``observe``: such an image is not applied, unless it shows
+        #: the arm from this camera's nominal mount: ``_remounted``).
         self.several_cameras = len(model.cameras) > 1
         #: The robot joints (n,): those whose innovations test the filter's consistency.
         self._robot = np.zeros(model.num_joints, bool)
@@ -142,6 +143,15 @@ class ImageProcessor:
         left = params.left_joints_for(camera_name)
         self.restart = Restart(start[VAR_A], start[VAR_B],
                                untouched=left if len(left) else None)
+        #: With several cameras: a restart of this camera's own pose alone (its six
+        #: offset joints and the joints that move only it), every other joint kept.
+        self.remount = None
+        if self.several_cameras:
+            own = set(model.camera_joint_indices(camera_name).tolist()) | {
+                i for i, name in enumerate(joints.names)
+                if name in params.camera_chain and i not in set(left.tolist())}
+            kept = np.array([i for i in range(len(joints.names)) if i not in own], np.int64)
+            self.remount = Restart(start[VAR_A], start[VAR_B], untouched=kept)
         self.update = CpfImageUpdate(
             model, camera, list(params.blocks_for(camera_name)), im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
@@ -219,8 +229,16 @@ class ImageProcessor:
                     f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
         if self.several_cameras and not restarted and \
                 predicted.visible_robot_pixels < self.params.health.min_robot_pixels:
-            return ImageOutcome(None, None, predicted, challenger=health.challenger,
-                                skip_reason=self._out_of_view_reason(predicted))
+            remounted = self._remounted(prior, observed, predicted)
+            if remounted is None:
+                return ImageOutcome(None, None, predicted, challenger=health.challenger,
+                                    skip_reason=self._out_of_view_reason(predicted))
+            log.warning("image %d at %.3f s (camera '%s'): the image hides the arm where "
+                        "the estimate puts it, and shows it where the camera's nominal mount "
+                        "does; the camera's pose restarts", frame.sequence,
+                        predicted.time_s, self.camera_name)
+            restarted, misplaced, acquired, restart = True, False, False, self.remount
+            prior, rendered, predicted = remounted
         plain = observation
         observation = self._occlusion_aware(observation, rendered, predicted)
         # A bias jump is tested only on an image that sees enough of the arm (the health's
@@ -285,6 +303,35 @@ class ImageProcessor:
         return ImageOutcome(observation, result, predicted, restarted, misplaced,
                             challenger=challenger,
                             innovation=image_innovation(prior, observation, self._robot))
+
+    def _remounted(self, prior: np.ndarray, observed: np.ndarray,
+                   predicted: ImageConsistency
+                   ) -> tuple[np.ndarray, np.ndarray, ImageConsistency] | None:
+        """The prior with this camera's own pose restarted (``remount``: its offset
+        joints to the nominal mount, the joints that move only it to their readings; the
+        arm and the other cameras' joints kept), its rendering and its consistency, when
+        the image hides the estimate's arm (at least ``health.min_robot_pixels`` in view,
+        too few of them unhidden) and agrees, consistently and on more pixels, with the
+        held arm seen from there; else None (the image is skipped).
+
+        An image that hides the arm where the estimate puts it is not only an occluder's:
+        a camera whose estimated pose is centimetres behind its true one sees the arm
+        nearer than the estimate puts it, all of it "hidden". Measured on the quick
+        suite's in-out-in-2cam/constant seed 3 (the code of b598ba4), the head camera's
+        first image (the arm 8.6 deg off on every joint) moved its pose 89 mm; from then
+        its images saw 575-970 robot pixels, 95-99 % of them hidden, and all were skipped,
+        also when the arm came back into its view: 85-121 mm in its frame to the end. A
+        plate in front of the arm hides it from the nominal mount too, and stays skipped.
+        """
+        if predicted.robot_pixels < self.params.health.min_robot_pixels:
+            return None
+        candidate = self.remount.apply(prior)
+        rendered = self.update.renderer.render(candidate[MEAN_A][None])[0]
+        seen = image_consistency(predicted.time_s, rendered, observed,
+                                 self.params.image.likelihood)
+        if self.consistent(seen) and agreeing_pixels(seen) > agreeing_pixels(predicted):
+            return candidate, rendered, seen
+        return None
 
     def _out_of_view_reason(self, predicted: ImageConsistency) -> str:
         """Why an image of one of several cameras that shows fewer than
