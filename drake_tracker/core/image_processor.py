@@ -147,9 +147,10 @@ class ImageProcessor:
         #: offset joints and the joints that move only it), every other joint kept.
         self.remount = None
         if self.several_cameras:
+            others = set(left.tolist())  # another camera's joints
             own = set(model.camera_joint_indices(camera_name).tolist()) | {
                 i for i, name in enumerate(joints.names)
-                if name in params.camera_chain and i not in set(left.tolist())}
+                if name in params.camera_chain and i not in others}
             kept = np.array([i for i in range(len(joints.names)) if i not in own], np.int64)
             self.remount = Restart(start[VAR_A], start[VAR_B], untouched=kept)
         self.update = CpfImageUpdate(

@@ -73,9 +73,7 @@ class ReadingGate:
         """An independent copy that shares the logger and joint names (see StreamClock's),
         and its warnings until either uses them (they change only on a problem): the
         delay buffer's LeafSystem copies its gate at every reading."""
-        clone = object.__new__(ReadingGate)
-        clone.__dict__.update(self.__dict__)
-        clone.clock = self.clock.copy()
+        clone = self._with(self.clock.copy(), self._warnings)
         self._shared_warnings = clone._shared_warnings = True
         return clone
 
@@ -89,10 +87,8 @@ class ReadingGate:
         return clone
 
     def is_new(self, raw_s: float) -> bool:
-        """Whether a stamp held on a port is a new sample (differs from the last seen):
-        ``is_new_stamp``, asked at every tick of the delay buffer system."""
-        raw, last = float(raw_s), self.last_raw_s  # a float: ``admit`` sets it
-        return not (raw == last or (raw != raw and last != last))
+        """Whether a stamp held on a port is a new sample (differs from the last seen)."""
+        return is_new_stamp(raw_s, self.last_raw_s)
 
     def admit(self, raw_s: float, values: np.ndarray) -> float | None:
         """The reading's time in the tracker's time base, or None (skipped, logged). A
