@@ -47,9 +47,7 @@ def image_update_cost(run: RecordedRun, params: TrackerParams) -> dict:
     from drake_tracker.tracker import Tracker
 
     model = model_for_run(run)
-    cameras = {run.camera_name: run.camera_intrinsics} | {
-        c.name: c.intrinsics for c in run.other_cameras}
-    tracker = Tracker(model, params=params, cameras=cameras)
+    tracker = Tracker(model, params=params, cameras=run.intrinsics_by_camera)
     start = time.perf_counter()
     track_stream(run_events(run), tracker)
     wall = time.perf_counter() - start
@@ -58,7 +56,7 @@ def image_update_cost(run: RecordedRun, params: TrackerParams) -> dict:
     updates = [t for times in per_camera.values() for t in times]
     images = len(run.image_capture_times_s) + sum(len(c.capture_times_s)
                                                   for c in run.other_cameras)
-    return {"cameras": list(cameras), "images_per_s": images / run.duration_s,
+    return {"cameras": run.camera_names, "images_per_s": images / run.duration_s,
             "updates": len(updates),
             "updates_per_camera": {name: len(t) for name, t in per_camera.items()},
             "update_ms_median": 1e3 * float(np.median(updates)),

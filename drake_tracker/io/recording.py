@@ -116,6 +116,12 @@ class RecordedRun:
         """Every camera's name, the first first."""
         return [self.camera_name] + [c.name for c in self.other_cameras]
 
+    @property
+    def intrinsics_by_camera(self) -> dict[str, CameraIntrinsics]:
+        """Every camera's intrinsics by name, the first first (``Tracker(cameras=...)``)."""
+        return {self.camera_name: self.camera_intrinsics} | {
+            c.name: c.intrinsics for c in self.other_cameras}
+
     def __post_init__(self) -> None:
         self.validate()
 

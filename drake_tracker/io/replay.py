@@ -116,8 +116,7 @@ def replay_run(run: RecordedRun, params: TrackerParams | None = None,
         raise ValueError(f"the run's joints {run.joint_names} differ from the model's "
                          f"{model.robot_joint_names}")
     if run.other_cameras:
-        tracker = Tracker(model, params=params, cameras={run.camera_name: run.camera_intrinsics} |
-                          {c.name: c.intrinsics for c in run.other_cameras})
+        tracker = Tracker(model, params=params, cameras=run.intrinsics_by_camera)
     else:
         tracker = Tracker(model, run.camera_intrinsics, params)
     times = run.truth_times_s if sample_times_s is None else np.asarray(sample_times_s)

@@ -197,9 +197,7 @@ def track_run(run: RecordedRun, model: TrackerModel, params: TrackerParams | Non
               out_dir: str | Path | None, progress: bool = True) -> dict:
     """Tracks a recorded run into ``out_dir`` (see :func:`track_to_folder`), against its
     truth; a run of several cameras with all of them."""
-    cameras = ({run.camera_name: run.camera_intrinsics} | {
-        c.name: c.intrinsics for c in run.other_cameras}) if run.other_cameras else \
-        run.camera_intrinsics
+    cameras = run.intrinsics_by_camera if run.other_cameras else run.camera_intrinsics
     return track_to_folder(run_events(run), model, cameras, params, out_dir,
                            truth=Truth(run.truth_times_s, run.truth_X_CE),
                            total_images=len(run.image_capture_times_s) + sum(
