@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 import textwrap
+from pathlib import Path
 
 from drake_tracker.cli.args import (
     PARAMS_HELP,
@@ -215,6 +216,37 @@ def _add_evaluate(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _add_compare(sub) -> None:
+    p = sub.add_parser(
+        "compare", help="compare two evaluations cell by cell, pooled over folders",
+        description="Compares the errors.csv of evaluate output folders: per cell, the "
+                    "median over runs and the worst run of each run's median error, "
+                    "flagged beyond 10 %% + 0.5 mm; then the ratio of run medians, after "
+                    "over before, with a 95 %% bootstrap interval. Each side may pool "
+                    "several folders (the same sweep with other image.seed values).",
+        epilog="examples:\n  drake-tracker compare out/quick out/quick_new\n"
+               "  drake-tracker compare out/s100,out/s200 out/new_s100,out/new_s200")
+    p.add_argument("before", help="evaluate output folder(s), comma-separated")
+    p.add_argument("after", help="evaluate output folder(s), comma-separated")
+    p.add_argument("--method", default="full_fusion", help="(default: %(default)s)")
+    p.add_argument("--settle-s", type=float, default=5.0,
+                   help="errors from this time on (s, default %(default)s)")
+
+    def run(args):
+        from drake_tracker.evaluation.compare import compare, format_comparison
+
+        try:
+            result = compare([Path(f) for f in args.before.split(",")],
+                             [Path(f) for f in args.after.split(",")],
+                             args.method, args.settle_s)
+        except ValueError as err:
+            raise UsageError(str(err)) from None
+        print(format_comparison(result))
+        return 0
+
+    p.set_defaults(func=run)
+
+
 def _add_servo(sub) -> None:
     p = sub.add_parser(
         "servo", help="closed-loop study: servo the hand to targets, with and without the "
@@ -275,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=_CommandParser)
     for add in (_add_demo, add_record, add_track, _add_bench, _add_evaluate,
-                _add_scenarios, _add_params, _add_servo):
+                _add_compare, _add_scenarios, _add_params, _add_servo):
         add(sub)
     return parser
 
