@@ -20,13 +20,12 @@ whole.
 
 from __future__ import annotations
 
-import csv
-import gzip
-import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from drake_tracker.evaluation.summary import read_errors_csv, settled
 
 #: The issues' tolerance: a cell is worse when a figure grew by more than this fraction
 #: of it plus :data:`ABSOLUTE_TOLERANCE_MM`.
@@ -73,11 +72,8 @@ def _tolerance(before_mm: float) -> float:
 
 def _errors_rows(folder: Path) -> list[dict]:
     for name in ("errors.csv", "errors.csv.gz"):
-        path = folder / name
-        if path.exists():
-            raw = path.read_bytes()
-            text = gzip.decompress(raw).decode() if name.endswith(".gz") else raw.decode()
-            return list(csv.DictReader(io.StringIO(text)))
+        if (folder / name).exists():
+            return read_errors_csv(folder / name)
     raise ValueError(f"{folder}: no errors.csv (the output folder of drake-tracker evaluate)")
 
 
@@ -90,8 +86,8 @@ def run_medians(folders: list[Path], method: str, settle_s: float
     cells: dict[tuple[str, str], list[float]] = {}
     for folder in folders:
         samples: dict[tuple[str, str, str], list[float]] = {}
-        for row in _errors_rows(Path(folder)):
-            if row["method"] == method and float(row["time_s"]) >= settle_s - 1e-9:
+        for row in settled(_errors_rows(Path(folder)), settle_s):
+            if row["method"] == method:
                 samples.setdefault((row["sequence"], row["bias"], row["seed"]), []).append(
                     float(row["translation_mm"]))
         if not samples:

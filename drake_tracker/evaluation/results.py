@@ -13,13 +13,12 @@ are read too.
 
 from __future__ import annotations
 
-import csv
 import gzip
-import io
 import json
 import os
 from pathlib import Path
 
+from drake_tracker.evaluation.summary import read_errors_csv
 from drake_tracker.evaluation.tasks import Task, environment
 
 _ERRORS_SUFFIXES = (".csv.gz", ".csv")  # written, then read as well (older folders)
@@ -33,12 +32,6 @@ def _write_atomic(path: Path, data: str | bytes) -> None:
     else:
         tmp.write_text(data)
     os.replace(tmp, path)
-
-
-def _read_errors(path: Path) -> list[dict]:
-    raw = path.read_bytes()
-    text = gzip.decompress(raw).decode() if path.name.endswith(".gz") else raw.decode()
-    return list(csv.DictReader(io.StringIO(text)))
 
 
 class ResultStore:
@@ -67,7 +60,7 @@ class ResultStore:
         if path is None:
             raise FileNotFoundError(f"no stored errors of task '{name}' in "
                                     f"{self.results_dir}")
-        return _read_errors(path)
+        return read_errors_csv(path)
 
     def is_done(self, task: Task) -> bool:
         """Whether ``task``'s errors file exists (a resumed evaluation skips it)."""

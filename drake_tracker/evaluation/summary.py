@@ -5,6 +5,8 @@ seeds of each seed's median, and the worst seed)."""
 from __future__ import annotations
 
 import csv
+import gzip
+import io
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +17,13 @@ from drake_tracker.metrics import PERCENTILES, percentile_summary
 SUMMARY_COLUMNS = (["sequence", "bias", "method", "metric"] + [f"p{p}" for p in PERCENTILES]
                    + ["seeds", "median_over_seeds", "worst_seed_median", "worst_seed"])
 METRICS = ("translation_mm", "rotation_deg")
+
+
+def read_errors_csv(path: Path) -> list[dict]:
+    """The rows of an errors CSV (``errors.csv``, or a task's gzip-compressed one)."""
+    raw = Path(path).read_bytes()
+    text = gzip.decompress(raw).decode() if str(path).endswith(".gz") else raw.decode()
+    return list(csv.DictReader(io.StringIO(text)))
 
 
 def settled(rows: list[dict], settle_s: float) -> list[dict]:
