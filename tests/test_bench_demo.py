@@ -44,9 +44,11 @@ def test_bench_tracker_alone_reports_the_tracker_on_recorded_sensors():
     rate = result["images_applied_per_s"]
     assert 0 < rate <= 1.0 / params.image.min_image_interval_s + 1.0 / result["duration_s"]
     assert result["updates_late"] + result["updates_on_time"] >= 1  # on the worker
+    assert 0 <= result["updates_late_searches"] <= result["updates_late"]
     assert result["deadline_wait_s_per_s"] >= 0
     text = format_tracker_alone(result)
     assert "tracker alone" in text and "images applied per s" in text
+    assert f"({result['updates_late_searches']} of them searches)" in text
 
 
 def test_bench_reading_path_reports_what_each_joint_reading_costs():

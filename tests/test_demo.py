@@ -70,6 +70,8 @@ def test_demo_writes_report_with_both_methods(demo_run):
     assert report["image_update_wait_s"] >= 0
     assert (report["image_update_wait_s"] > 0) == (report["image_updates_late"] > 0)
     assert "late at their deadline" in stdout
+    assert 0 <= report["image_updates_late_searches"] <= report["image_updates_late"]
+    assert f"{report['image_updates_late_searches']} of them searches" in stdout
     assert (out / "errors.png").stat().st_size > 0
     assert "tracker_kalman_bank" in (out / "diagram.dot").read_text()
     assert "meshcat.html" in stdout and "ends with the run" in stdout

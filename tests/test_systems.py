@@ -267,6 +267,15 @@ def test_deadline_waits_count_done_and_late_updates_and_what_they_raise():
         else:
             assert waits.join(slow) == 8
     assert waits.on_time == 1 and waits.late == 2 and waits.waited_s >= 0.09
+    assert waits.late_searches == 0  # neither was started as a search
+    slow = Future()
+    threading.Thread(target=lambda: (time.sleep(0.05), slow.set_result(9))).start()
+    assert waits.join(slow, search=True) == 9
+    assert (waits.late, waits.late_searches) == (3, 1)
+    searched = Future()
+    searched.set_result(10)  # a search done in time is on time, whatever it was
+    assert waits.join(searched, search=True) == 10
+    assert (waits.on_time, waits.late_searches) == (2, 1)
 
 
 @pytest.mark.parametrize("latency_s", [0.0, 0.01])
@@ -294,6 +303,8 @@ def test_cpf_system_counts_the_updates_its_deadline_waited_for(apollo, latency_s
         assert (waits.on_time, waits.late, waits.waited_s) == (0, 0, 0.0)
     else:
         assert waits.on_time == 0 and waits.late == 1 and waits.waited_s >= 0.15
+        # The system's first image finds no arm acquired: its update was a search.
+        assert waits.late_searches == 1
 
 
 def test_cpf_system_warns_when_the_prior_never_takes_in_its_updates(apollo, caplog):

@@ -111,6 +111,7 @@ def bench_tracker_alone(params: TrackerParams, duration_s: float,
             "images_applied_per_s": state.images_applied / run.duration_s,
             "update_wall_ms_median": 1e3 * float(np.median(updates)) if updates else None,
             "updates_late": waits.late, "updates_on_time": waits.on_time,
+            "updates_late_searches": waits.late_searches,
             "deadline_wait_s_per_s": waits.waited_s / run.duration_s}
 
 
@@ -134,4 +135,5 @@ def format_tracker_alone(alone: dict) -> str:
             f"update's worker) {alone['other_threads_cpu_s_per_s']:.2f}; "
             f"{alone['images_applied_per_s']:.1f} images applied per s, {update}; "
             f"{alone['updates_late']} of {alone['updates_late'] + alone['updates_on_time']} "
-            f"late at their deadline, {alone['deadline_wait_s_per_s']:.2f} s waited per s")
+            f"late at their deadline ({alone.get('updates_late_searches', 0)} of them "
+            f"searches), {alone['deadline_wait_s_per_s']:.2f} s waited per s")

@@ -40,7 +40,8 @@ Keys of ``bench.json``:
   per simulated second in the Simulator's thread and in the other threads (the image
   update's worker), images applied per second, the median wall time of an update, and
   how many updates were not done at their deadline (``CpfImageUpdateSystem.
-  deadline_waits``) with the Simulator's wait per simulated second;
+  deadline_waits``; ``updates_late_searches`` of them started as searches, the arm not
+  yet acquired) with the Simulator's wait per simulated second;
 * ``tracker_alone_paced``: the same held to real time, as on a robot (``defaults``, and
   ``every_frame`` with ``image.min_image_interval_s`` 0: every frame of the camera, at
   ``demo_camera_rate_hz``): its late updates took longer than ``image.update_latency_s``

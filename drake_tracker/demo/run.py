@@ -276,6 +276,7 @@ def run_demo(args: argparse.Namespace, scenario: Scenario | None = None,
         "real_time_factor": run.duration_s / run.extra["wall_time_s"],
         # Image updates the Simulator had to wait for at their deadline, and how long.
         "image_updates_late": waits.late,
+        "image_updates_late_searches": waits.late_searches,
         "image_updates_on_time": waits.on_time,
         "image_update_wait_s": waits.waited_s,
         # Loading (a machine's first run: compiling) the kernels before the simulation.
@@ -290,7 +291,7 @@ def run_demo(args: argparse.Namespace, scenario: Scenario | None = None,
     print(f"real-time factor {report['real_time_factor']:.2f} (simulation "
           f"{report['simulation_wall_time_s']:.1f} s); wall time {report['wall_time_s']:.1f} s; "
           f"{waits.late} of {waits.late + waits.on_time} image updates late at their "
-          f"deadline ({waits.waited_s:.1f} s waited)")
+          f"deadline, {waits.late_searches} of them searches ({waits.waited_s:.1f} s waited)")
     written = ["report.json", "errors.png", "meshcat.html (open it in a browser)",
                "diagram.dot"] + (["diagram.png"] if png else [])
     print(f"wrote to {out}/: {', '.join(written)}")

@@ -42,6 +42,8 @@ class ImageUpdateInFlight:
     due_s: float
     outcome: Future
     camera: str = ""
+    #: Started as a search (the camera's arm not acquired when it was taken up).
+    search: bool = False
 
 
 @dataclass

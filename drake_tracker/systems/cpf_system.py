@@ -222,7 +222,7 @@ class CpfImageUpdateSystem(LeafSystem):
 
     def _finish_in_flight(self, s: CpfState) -> None:
         job, s.in_flight = s.in_flight, None
-        s.count(self._finish(job.camera, job.frame, job.prior, job.outcome, s))
+        s.count(self._finish(job.camera, job.frame, job.prior, job.outcome, s, job.search))
 
     def _may_be_due(self, name: str, prior: ImagePrior, s: CpfState) -> bool:
         """Whether camera ``name``'s new frame may be due once the update in flight is
@@ -258,7 +258,7 @@ class CpfImageUpdateSystem(LeafSystem):
         if self._latency_s > 0:
             outcome = submit_image_update(observe, *args)
             s.in_flight = ImageUpdateInFlight(frame, prior, now_s + self._latency_s, outcome,
-                                              name)
+                                              name, not cam.health.acquired)
             return None
         outcome = Future()
         try:
@@ -268,11 +268,12 @@ class CpfImageUpdateSystem(LeafSystem):
         return self._finish(name, frame, prior, outcome, s)
 
     def _finish(self, name: str, frame: DepthFrame, prior: ImagePrior, outcome: Future,
-                s: CpfState) -> bool:
+                s: CpfState, search: bool = False) -> bool:
         """Applies a finished update of camera ``name`` (waiting for it if it is still
-        running); True when it produced a new observation message."""
+        running; ``search``: it was started as one); True when it produced a new
+        observation message."""
         try:
-            outcome = (self.deadline_waits.join(outcome) if self._latency_s > 0
+            outcome = (self.deadline_waits.join(outcome, search) if self._latency_s > 0
                        else outcome.result())
         except Exception as err:  # one failed image never stops the simulation
             return self._skip(name, frame, f"{type(err).__name__}: {err}")

@@ -80,9 +80,14 @@ class DeadlineWaits:
     on_time: int = 0
     late: int = 0
     waited_s: float = 0.0
+    #: Of the late ones, the searches (updates started before the arm was acquired:
+    #: ``image.acquisition_num_particles`` per block, three times a tracked update's
+    #: evaluations by default), which a deadline set for a tracked update does not fit.
+    late_searches: int = 0
 
-    def join(self, outcome: Future) -> Any:
-        """``outcome.result()`` (raising what the update raised), counted."""
+    def join(self, outcome: Future, search: bool = False) -> Any:
+        """``outcome.result()`` (raising what the update raised), counted; ``search``:
+        the update was started as a search."""
         if outcome.done():
             self.on_time += 1
             return outcome.result()
@@ -91,4 +96,5 @@ class DeadlineWaits:
             return outcome.result()
         finally:
             self.late += 1
+            self.late_searches += bool(search)
             self.waited_s += time.perf_counter() - start
