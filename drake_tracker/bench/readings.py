@@ -142,10 +142,12 @@ def bench_recorded_reading_path(params: TrackerParams,
                                 recording: tuple[Scenario, RecordedRun],
                                 quick: bool = False) -> dict:
     """:func:`bench_reading_path` on :func:`record_demo_sensors`'s recording, as
-    ``drake-tracker bench`` runs it (2 repeats with ``quick``, else 3)."""
+    ``drake-tracker bench`` runs it (3 repeats with ``quick``, else 9: on the shared VM
+    the figure doubled for spells of about ten seconds, 44 against 60-94 µs in six runs
+    of one process, and the least of turns spread over longer finds the idle core)."""
     scenario, run = recording
     return bench_reading_path(run, build_tracker_model(scenario.resolved_robot_config()),
-                              params, 1.0 / scenario.encoders.rate_hz, 2 if quick else 3)
+                              params, 1.0 / scenario.encoders.rate_hz, 3 if quick else 9)
 
 
 def format_reading_path(result: dict) -> str:
