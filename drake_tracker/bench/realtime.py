@@ -135,5 +135,5 @@ def format_tracker_alone(alone: dict) -> str:
             f"update's worker) {alone['other_threads_cpu_s_per_s']:.2f}; "
             f"{alone['images_applied_per_s']:.1f} images applied per s, {update}; "
             f"{alone['updates_late']} of {alone['updates_late'] + alone['updates_on_time']} "
-            f"late at their deadline ({alone.get('updates_late_searches', 0)} of them "
+            f"late at their deadline ({alone['updates_late_searches']} of them "
             f"searches), {alone['deadline_wait_s_per_s']:.2f} s waited per s")
