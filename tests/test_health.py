@@ -40,7 +40,7 @@ def test_image_consistency_counts_agreeing_and_see_through_pixels():
 def test_health_states_follow_consecutive_images():
     p = HealthParams(min_robot_pixels=10, max_see_through=0.25, lost_after_images=3,
                      recovered_after_images=2)
-    good = ImageConsistency(0.0, 100, 0.9, 0.02)
+    good = ImageConsistency(0.0, 100, 0.97, 0.02)
     bad = ImageConsistency(0.0, 100, 0.2, 0.6)
     unseen = ImageConsistency(0.0, 3, 0.0, 0.0)
     states = []
@@ -60,7 +60,7 @@ def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
     from drake_tracker.core.robustness.health import Challenger
 
     p = HealthParams(min_robot_pixels=10, lost_after_images=2, recovered_after_images=2)
-    good = ImageConsistency(0.0, 100, 0.9, 0.02)
+    good = ImageConsistency(0.0, 100, 0.97, 0.02)
     bad = ImageConsistency(0.0, 100, 0.2, 0.6)
     hidden = ImageConsistency(0.0, 100, 0.05, 0.0, occluded=0.95)
     out = Challenger(np.zeros(3), np.ones(3), 0.0)
@@ -85,18 +85,18 @@ def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
 
 def test_an_image_that_does_not_confirm_the_estimate_reports_uncertain_and_nothing_else():
     """``tracking_agreement``: an image that sees through none of the arm but agrees on
-    too little of its unhidden pixels (an estimate centimetres off) reports
-    ``uncertain``, and so does the next one, which must confirm it again (two in a row,
-    as the state machine asks of ``tracking``); hidden pixels do not count against it;
-    every other field is what the see-through test alone (``tracking_agreement`` 0)
-    gives."""
+    too little of the estimate's robot pixels (an estimate centimetres off, or an arm
+    half hidden: a hidden pixel confirms nothing) reports ``uncertain``, and so does the
+    next one, which must confirm it again (two in a row, as the state machine asks of
+    ``tracking``); every other field is what the see-through test alone
+    (``tracking_agreement`` 0) gives."""
     strict = HealthParams(min_robot_pixels=10, tracking_agreement=0.9)
     lenient = HealthParams(min_robot_pixels=10, tracking_agreement=0.0)
     close = ImageConsistency(0.0, 100, 0.95, 0.0)
     off = ImageConsistency(0.0, 100, 0.8, 0.0)  # 80 % agree, none seen through
-    half_hidden = ImageConsistency(0.0, 100, 0.46, 0.0, occluded=0.5)  # 92 % of 50
-    images = [close, close, off, off, half_hidden, close]
-    expected = ["U", "T", "U", "U", "U", "T"]
+    half_hidden = ImageConsistency(0.0, 100, 0.46, 0.0, occluded=0.5)  # 92 % of 50 unhidden
+    images = [close, close, off, off, close, close, half_hidden, close, close]
+    expected = ["U", "T", "U", "U", "U", "T", "U", "U", "T"]
     a, b = TrackerHealth(), TrackerHealth()
     for k, (image, state) in enumerate(zip(images, expected)):
         image = ImageConsistency(0.1 * k, image.robot_pixels, image.agreement,
@@ -113,7 +113,7 @@ def test_an_image_that_does_not_confirm_the_estimate_reports_uncertain_and_nothi
 
 def test_acquired_while_a_recent_image_confirmed_the_estimate():
     p = HealthParams(min_robot_pixels=10, recovered_after_images=1, reacquire_after_s=1.0)
-    good = ImageConsistency(0.0, 100, 0.9, 0.02)
+    good = ImageConsistency(0.0, 100, 0.97, 0.02)
     h = TrackerHealth()
     assert not h.acquired
     h = next_health(h, ImageConsistency(0.0, 3, 0.0, 0.0), p)  # nothing seen yet
