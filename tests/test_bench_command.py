@@ -50,6 +50,7 @@ def test_the_bench_command_runs_the_reading_path_alone(tmp_path, capsys):
     assert list(result) == ["reading_path"]
     figures = result["reading_path"]
     for key in ("us_per_reading", "bank_us_per_reading", "buffer_us_per_reading",
-                "source_us_per_reading"):
+                "source_us_per_reading", "source_ports_us_per_reading",
+                "tracker_us_per_reading"):
         assert math.isfinite(figures[key]), key  # no time asserted
     assert figures["last_reading_filtered_s"] >= figures["duration_s"] - 0.01

@@ -58,8 +58,13 @@ def test_bench_reading_path_reports_what_each_joint_reading_costs():
     period_s = 1.0 / scenario.encoders.rate_hz
     result = bench_reading_path(run, model, params, period_s, repeats=1)
     for key in ("us_per_reading", "bank_us_per_reading", "buffer_us_per_reading",
-                "source_us_per_reading"):
-        assert math.isfinite(result[key]) and result[key] > 0, key
+                "source_us_per_reading", "source_ports_us_per_reading",
+                "tracker_us_per_reading"):
+        assert math.isfinite(result[key]), key
+    assert result["us_per_reading"] > 0 and result["source_us_per_reading"] > 0
+    # The parts add up: the tracker's share is the whole less the source's port calcs.
+    assert math.isclose(result["tracker_us_per_reading"] + result["source_ports_us_per_reading"],
+                        result["us_per_reading"])
     assert result["duration_s"] == 1.2 and result["repeats"] == 1
     # The timed Diagram did filter the readings, up to the last one before the end
     # (AdvanceTo(t) leaves the updates at t pending).

@@ -15,8 +15,12 @@ systems, least of ``repeats``), the buffer alone (``buffer_us_per_reading``), th
 bank's share (``bank_us_per_reading``: both less the buffer; the bank reads the buffer's
 admitted reading, so it does not run alone), and ``source_us_per_reading``: the
 :class:`~drake_tracker.systems.recorded_run_source.RecordedRunSource` that plays the
-readings, evaluated by a system that does nothing else (a hardware driver has a cost of
-its own; this is the share of the figures above that is not the tracker's).
+readings, its three ports evaluated by a system that does nothing else. Less the same
+system reading nothing (the Simulator's step and one event), that is
+``source_ports_us_per_reading``, the source's port calculations: a hardware driver has
+a cost of its own, and this share of the figures above is not the tracker's.
+``tracker_us_per_reading``: both systems less the source's ports (the Simulator's step
+to the event counted as the tracker's).
 ``last_reading_filtered_s``: the stamp of the bank's latest filtered reading at the end
 (the run's last reading before its end: every reading went through).
 """
@@ -47,31 +51,36 @@ WARM_UP_S = 0.5
 
 
 class _SourceReader(LeafSystem):
-    """Reads the source's three ports at the encoder rate and does nothing else."""
+    """Reads the source's three ports at the encoder rate (``read`` False: reads
+    nothing, an event's cost alone) and does nothing else."""
 
-    def __init__(self, num_joints: int, period_s: float):
+    def __init__(self, num_joints: int, period_s: float, read: bool = True):
         super().__init__()
         self._ports = (self.DeclareVectorInputPort("measured_position", num_joints),
                        self.DeclareVectorInputPort("measurement_time", 1),
                        self.DeclareAbstractInputPort("depth_frame",
                                                      AbstractValue.Make(object())))
+        self._reads = read
         self.DeclarePeriodicUnrestrictedUpdateEvent(period_s, 0.0, self._read)
 
     def _read(self, context, state) -> EventStatus:
-        for port in self._ports:
-            port.Eval(context)
+        if self._reads:
+            for port in self._ports:
+                port.Eval(context)
         return EventStatus.DidNothing()
 
 
 def _cpu_us_per_reading(run: RecordedRun, model: TrackerModel, params: TrackerParams,
                         period_s: float, which: str) -> tuple[float, float | None]:
     """CPU µs of this thread per reading after WARM_UP_S, for ``which`` of "both",
-    "buffer", "source"; and the stamp of the bank's latest filtered reading."""
+    "buffer", "source", "idle" (a system whose event reads nothing); and the stamp of
+    the bank's latest filtered reading."""
     builder = DiagramBuilder()
     source = builder.AddSystem(RecordedRunSource(run))
     sinks = []
-    if which == "source":
-        sinks.append(builder.AddSystem(_SourceReader(len(run.joint_names), period_s)))
+    if which in ("source", "idle"):
+        sinks.append(builder.AddSystem(_SourceReader(len(run.joint_names), period_s,
+                                                     read=which == "source")))
     if which in ("both", "buffer"):
         buffer = builder.AddSystem(DelayBufferSystem(model=model, params=params,
                                                      period_s=period_s))
@@ -83,12 +92,12 @@ def _cpu_us_per_reading(run: RecordedRun, model: TrackerModel, params: TrackerPa
                                                        period_s=period_s))
         builder.Connect(buffer.get_correction_output_port(), bank.get_correction_input_port())
         builder.Connect(buffer.get_reading_output_port(), bank.get_reading_input_port())
-    if which == "source":
+    if which in ("source", "idle"):
         for name in ("measured_position", "measurement_time", "depth_frame"):
             builder.Connect(source.GetOutputPort(name), sinks[0].GetInputPort(name))
     simulator = Simulator(builder.Build())
     root = simulator.get_mutable_context()
-    if which != "source":
+    if which in ("both", "buffer"):
         buffer.get_image_observation_input_port().FixValue(
             buffer.GetMyMutableContextFromRoot(root), ImageObservationMessage())
     simulator.AdvanceTo(WARM_UP_S)
@@ -108,7 +117,7 @@ def bench_reading_path(run: RecordedRun, model: TrackerModel, params: TrackerPar
     if not run.duration_s > WARM_UP_S + 0.5:
         raise ValueError(f"bench_reading_path needs a run longer than {WARM_UP_S + 0.5} s, "
                          f"got {run.duration_s} s")
-    kinds = ("both", "buffer", "source")
+    kinds = ("both", "buffer", "source", "idle")
     timed = {kind: [] for kind in kinds}
     for _ in range(max(1, repeats)):
         for kind in kinds:
@@ -117,10 +126,14 @@ def bench_reading_path(run: RecordedRun, model: TrackerModel, params: TrackerPar
             if kind == "both":
                 latest = last_reading_s
     best = {kind: min(values) for kind, values in timed.items()}
+    ports = best["source"] - best["idle"]
     return {"us_per_reading": best["both"],
             "bank_us_per_reading": best["both"] - best["buffer"],
             "buffer_us_per_reading": best["buffer"],
-            "source_us_per_reading": best["source"], "last_reading_filtered_s": latest,
+            "source_us_per_reading": best["source"],
+            "source_ports_us_per_reading": ports,
+            "tracker_us_per_reading": best["both"] - ports,
+            "last_reading_filtered_s": latest,
             "duration_s": run.duration_s, "repeats": max(1, repeats)}
 
 
@@ -156,4 +169,6 @@ def format_reading_path(result: dict) -> str:
             f"included): {result['us_per_reading']:.0f} us of CPU (bank's share "
             f"{result['bank_us_per_reading']:.0f}, buffer alone "
             f"{result['buffer_us_per_reading']:.0f}; of each, the recorded source's ports "
-            f"{result['source_us_per_reading']:.0f})")
+            f"{result['source_ports_us_per_reading']:.0f}, so the tracker's systems "
+            f"{result['tracker_us_per_reading']:.0f}; a system that reads the ports and "
+            f"does nothing else {result['source_us_per_reading']:.0f})")
