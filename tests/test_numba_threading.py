@@ -159,7 +159,10 @@ def test_one_slowed_call_does_not_flip_the_choice(two_numba_threads):
     assert not policy.use_parallel()
 
 
-def test_the_first_call_of_each_compilation_is_not_measured(two_numba_threads):
+def test_the_first_call_of_each_compilation_is_not_measured(two_numba_threads, monkeypatch):
+    from drake_tracker.core.jit import numba_threading
+
+    monkeypatch.setattr(numba_threading, "_calls_in_process", {False: 0, True: 0})
     policy = SerialOrParallel(window=1, warmup_calls=1)
     assert policy.use_parallel() is False
     policy.record(False, 5.0, 10)  # compiles / loads: not measured
@@ -171,6 +174,27 @@ def test_the_first_call_of_each_compilation_is_not_measured(two_numba_threads):
     policy.record(True, 0.6, 10)
     assert policy.cost_per_item == {False: 0.1, True: 0.06}
     assert policy.use_parallel() is True
+    # The warm-up is the process's, not each policy's: a second policy (another
+    # tracker's renderer) measures its first call of each compilation, so its first
+    # image runs one serial sweep, not two serial and an unmeasured parallel one.
+    second = SerialOrParallel(window=1, warmup_calls=1)
+    assert second.use_parallel() is False
+    second.record(False, 2.0, 10)
+    assert second.cost_per_item[False] == 0.2 and second.use_parallel() is True
+    second.record(True, 0.5, 10)
+    assert second.cost_per_item == {False: 0.2, True: 0.05}
+    assert [second.use_parallel() for _ in range(3)] == [True] * 3
+
+
+def test_a_forked_child_warms_up_afresh(monkeypatch):
+    """A forked child's threads are its own: its first calls are warm-up calls again."""
+    from drake_tracker.core.jit import numba_threading
+
+    monkeypatch.setattr(numba_threading, "_calls_in_process", {False: 7, True: 9})
+    # (restored after the test: this process is no fork)
+    monkeypatch.setattr(numba_threading, "_forked_after_unsafe_start", False)
+    numba_threading._after_fork_in_child()
+    assert numba_threading._calls_in_process == {False: 0, True: 0}
 
 
 def test_one_thread_is_always_serial():
