@@ -12,13 +12,15 @@ thread, and the buffer's ``image_observation`` input holds no observation.
 
 Figures: ``us_per_reading`` (CPU time of the Simulator's thread per reading, both
 systems, least of ``repeats``), the buffer alone (``buffer_us_per_reading``), the
-bank's share (``bank_us_per_reading``: both less the buffer; the bank reads the buffer's
-admitted reading, so it does not run alone), and ``source_us_per_reading``: the
+bank's share (``bank_us_per_reading``: both less the buffer, the median over the turns
+of the difference within each; the bank reads the buffer's admitted reading, so it
+does not run alone), and ``source_us_per_reading``: the
 :class:`~drake_tracker.systems.recorded_run_source.RecordedRunSource` that plays the
 readings, its three ports evaluated by a system that does nothing else. Less the same
 system reading nothing (the Simulator's step and one event), that is
 ``source_ports_us_per_reading``, the source's port calculations: a hardware driver has
-a cost of its own, and this share of the figures above is not the tracker's.
+a cost of its own, and this share of the figures above is not the tracker's (the
+median over the turns, as the bank's share).
 ``tracker_us_per_reading``: both systems less the source's ports (the Simulator's step
 to the event counted as the tracker's).
 ``last_reading_filtered_s``: the stamp of the bank's latest filtered reading at the end
@@ -30,6 +32,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING
 
+import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
@@ -126,9 +129,12 @@ def bench_reading_path(run: RecordedRun, model: TrackerModel, params: TrackerPar
             if kind == "both":
                 latest = last_reading_s
     best = {kind: min(values) for kind, values in timed.items()}
-    ports = best["source"] - best["idle"]
+    # A share is the median over the turns of its two variants' difference within the
+    # turn (the least of each, subtracted, went to 0 or below in a slow spell).
+    ports = float(np.median(np.subtract(timed["source"], timed["idle"])))
+    bank = float(np.median(np.subtract(timed["both"], timed["buffer"])))
     return {"us_per_reading": best["both"],
-            "bank_us_per_reading": best["both"] - best["buffer"],
+            "bank_us_per_reading": bank,
             "buffer_us_per_reading": best["buffer"],
             "source_us_per_reading": best["source"],
             "source_ports_us_per_reading": ports,
