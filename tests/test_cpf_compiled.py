@@ -82,3 +82,25 @@ def test_the_image_update_runs_compiled_sweeps_with_the_python_result(update):
     python = coarse(prior, observation, np.random.default_rng(2))
     assert coarse.times.evaluations == 2 * evaluations
     _assert_same(python, compiled)
+
+
+def test_a_particles_score_does_not_depend_on_its_batch_mates(update):
+    """The compiled sweep batches a block's particles in the order of the block's value
+    (near ones share a pass over the pixels); that changes no result only because each
+    particle's score is its own, bit for bit, whichever particles share its batch."""
+    from drake_tracker.core.render.fused_score import _score_serial
+
+    observation = bench_observation(update)
+    prior = tracking_prior(update.model)
+    rng = np.random.default_rng(3)
+    q = prior[MEAN_A] + rng.normal(0.0, 0.05, (37, len(prior[MEAN_A])))
+    q[::4] += rng.normal(0.0, 0.3, q[::4].shape)  # far-off draws, as a jump component's
+    head, tail = CompiledLikelihood(update.renderer, observation).kernel_arguments(len(q))
+    plain = np.zeros(len(q))
+    _score_serial(np.ascontiguousarray(q), *head, 1, *tail, plain)
+    for seed in range(3):
+        order = np.random.default_rng(seed).permutation(len(q))
+        permuted = np.zeros(len(q))
+        _score_serial(np.ascontiguousarray(q[order]), *head, 1, *tail, permuted)
+        assert np.array_equal(permuted, plain[order])
+    assert np.ptp(plain) > 100.0  # the particles score differently

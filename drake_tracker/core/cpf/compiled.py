@@ -147,6 +147,8 @@ def _sweep(rng, samples, block_index, block_start, prior, proposal, proposal_jum
     (resamples, flat, ok); ok False: a log-likelihood was not finite."""
     n = samples.shape[0]
     current = np.zeros(n)
+    ordered = np.empty_like(samples)
+    scores = np.zeros(n)
     density = np.zeros(n)
     other = np.zeros(n)
     resamples = 0
@@ -165,10 +167,20 @@ def _sweep(rng, samples, block_index, block_start, prior, proposal, proposal_jum
                     sd = np.sqrt(sd ** 2 + proposal[JUMP_STD, c] ** 2)
                 values[i, j] = proposal[MEAN, c] + sd * noise[i, j]
                 samples[i, c] = values[i, j]
+        # The kernel scores LANES particles in one pass over the pixels their triangles
+        # cover together: one far off (a bias-jump draw, a wide search) widens the pass
+        # of its whole batch. Batched in the order of the block's first value, near ones
+        # share batches. Each particle's score is its own whatever its batch (tested), so
+        # the result is the one of the particles' own order, bit for bit.
+        order = np.argsort(values[:, 0], kind="mergesort")
+        for i in range(n):
+            ordered[i, :] = samples[order[i], :]
         if parallel:
-            _score_parallel(samples, *head, chunks, *tail, current)
+            _score_parallel(ordered, *head, chunks, *tail, scores)
         else:
-            _score_serial(samples, *head, 1, *tail, current)
+            _score_serial(ordered, *head, 1, *tail, scores)
+        for i in range(n):
+            current[order[i]] = scores[i]
         for f in factors:
             current[:] = f * current
         if not np.all(np.isfinite(current)):
