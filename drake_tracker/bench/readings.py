@@ -80,24 +80,19 @@ def _cpu_us_per_reading(run: RecordedRun, model: TrackerModel, params: TrackerPa
     the bank's latest filtered reading."""
     builder = DiagramBuilder()
     source = builder.AddSystem(RecordedRunSource(run))
-    sinks = []
     if which in ("source", "idle"):
-        sinks.append(builder.AddSystem(_SourceReader(len(run.joint_names), period_s,
-                                                     read=which == "source")))
-    if which in ("both", "buffer"):
-        buffer = builder.AddSystem(DelayBufferSystem(model=model, params=params,
-                                                     period_s=period_s))
-        for name in ("measured_position", "measurement_time", "depth_frame"):
-            builder.Connect(source.GetOutputPort(name), buffer.GetInputPort(name))
-        sinks.append(buffer)
+        sink = builder.AddSystem(_SourceReader(len(run.joint_names), period_s,
+                                               read=which == "source"))
+    else:
+        sink = buffer = builder.AddSystem(DelayBufferSystem(model=model, params=params,
+                                                            period_s=period_s))
+    for name in ("measured_position", "measurement_time", "depth_frame"):
+        builder.Connect(source.GetOutputPort(name), sink.GetInputPort(name))
     if which == "both":
         bank = builder.AddSystem(JointKalmanBankSystem(model=model, params=params,
                                                        period_s=period_s))
         builder.Connect(buffer.get_correction_output_port(), bank.get_correction_input_port())
         builder.Connect(buffer.get_reading_output_port(), bank.get_reading_input_port())
-    if which in ("source", "idle"):
-        for name in ("measured_position", "measurement_time", "depth_frame"):
-            builder.Connect(source.GetOutputPort(name), sinks[0].GetInputPort(name))
     simulator = Simulator(builder.Build())
     root = simulator.get_mutable_context()
     if which in ("both", "buffer"):
