@@ -41,6 +41,10 @@ def test_an_empty_parameter_file_gives_the_defaults(tmp_path):
 @pytest.mark.parametrize("loader, text, message", [
     (load_tracker_params, "image:\n  annealing_betas: 0.5\n",
      "image.annealing_betas: 0.5 (expected a list)"),
+    (load_tracker_params, "health:\n  lost_after_images: 3\n",
+     "health.lost_after_images: replaced by health.images_in_a_row"),
+    (load_tracker_params, "image:\n  estimate_occlusion: false\n",
+     "image.estimate_occlusion: removed"),
     (load_scenario, "duration_s: long\n", "duration_s: 'long' (expected a number)"),
     (load_scenario, "preset: 3\n", "preset: 3 (expected a preset name"),
     (load_scenario, "camera:\n  rate_hz: [30]\n", "camera.rate_hz: [30] (expected a number)"),

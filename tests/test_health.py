@@ -38,19 +38,19 @@ def test_image_consistency_counts_agreeing_and_see_through_pixels():
 
 
 def test_health_states_follow_consecutive_images():
-    p = HealthParams(min_robot_pixels=10, max_see_through=0.25, lost_after_images=3,
-                     recovered_after_images=2)
+    p = HealthParams(min_robot_pixels=10, max_see_through=0.25, images_in_a_row=3)
     good = ImageConsistency(0.0, 100, 0.97, 0.02)
     bad = ImageConsistency(0.0, 100, 0.2, 0.6)
     unseen = ImageConsistency(0.0, 3, 0.0, 0.0)
     states = []
     h = TrackerHealth()
-    for image in (good, good, bad, bad, bad, unseen, good, good, unseen, good):
+    for image in (good, good, good, bad, bad, bad, unseen, good, good, good, unseen, good):
         h = next_health(h, image, p)
         states.append(h.state.name[0])
-    # U: the first good image is not yet enough; L after 3 bad in a row; an unseen
-    # image keeps "lost" until 2 good ones in a row; then unseen -> uncertain.
-    assert states == ["U", "T", "U", "U", "L", "L", "L", "T", "U", "U"]
+    # One count for both ways: T after 3 good in a row, L after 3 bad in a row; an
+    # unseen image keeps "lost" until 3 good ones in a row; then unseen -> uncertain,
+    # and one good image is not enough to get back.
+    assert states == ["U", "U", "T", "U", "U", "L", "L", "L", "L", "T", "U", "U"]
 
 
 def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
@@ -59,7 +59,7 @@ def test_a_challenger_makes_an_agreeing_estimate_uncertain_and_nothing_else():
     once it is gone, are those of the same images without it."""
     from drake_tracker.core.robustness.health import Challenger
 
-    p = HealthParams(min_robot_pixels=10, lost_after_images=2, recovered_after_images=2)
+    p = HealthParams(min_robot_pixels=10, images_in_a_row=2)
     good = ImageConsistency(0.0, 100, 0.97, 0.02)
     bad = ImageConsistency(0.0, 100, 0.2, 0.6)
     hidden = ImageConsistency(0.0, 100, 0.05, 0.0, occluded=0.95)
@@ -112,7 +112,7 @@ def test_an_image_that_does_not_confirm_the_estimate_reports_uncertain_and_nothi
 
 
 def test_acquired_while_a_recent_image_confirmed_the_estimate():
-    p = HealthParams(min_robot_pixels=10, recovered_after_images=1, reacquire_after_s=1.0)
+    p = HealthParams(min_robot_pixels=10, images_in_a_row=1, max_unconfirmed_s=1.0)
     good = ImageConsistency(0.0, 100, 0.97, 0.02)
     h = TrackerHealth()
     assert not h.acquired
@@ -130,8 +130,8 @@ def test_acquired_while_a_recent_image_confirmed_the_estimate():
     for t in (3.5, 4.0, 5.0):
         h = next_health(h, ImageConsistency(t, 100, 0.05, 0.0, occluded=0.95), p)
     assert not h.acquired
-    with pytest.raises(ValueError, match="reacquire_after_s"):
-        HealthParams(reacquire_after_s=0.0).validate()
+    with pytest.raises(ValueError, match="max_unconfirmed_s"):
+        HealthParams(max_unconfirmed_s=0.0).validate()
 
 
 def _track_step(apollo, run, params, step_s):

@@ -111,7 +111,7 @@ def _no_arm(run):
 
 
 def _restart(p):
-    p.health.misplaced_fraction, p.health.restart_after_misplaced_s = 0.99, 0.0
+    p.health.misplaced_fraction, p.health.max_unconfirmed_s = 0.99, 1e-6
 
 
 def _second_opinion(p):

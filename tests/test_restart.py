@@ -93,7 +93,7 @@ def test_restart_forgets_the_bias_and_commutes_with_an_angle_shift():
 
 
 def test_health_counts_misplaced_time_and_a_restart_resets_it():
-    params = HealthParams(restart_after_misplaced_s=1.0)
+    params = HealthParams(max_unconfirmed_s=1.0)
     unseen = ImageConsistency(0.0, 0, 0.0, 0.0)
     health = TrackerHealth()
     for t in (0.0, 0.5, 0.9):
@@ -171,7 +171,7 @@ def test_an_image_that_agrees_with_the_encoders_and_not_the_estimate_restarts_it
 
 def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough(scene):
     """The encoders are -6 deg off on arm joints 2 and 4 (the image sees through 42 % of
-    their arm): the out-of-view estimate stays until ``restart_after_misplaced_s``. (Its
+    their arm): the out-of-view estimate stays until ``max_unconfirmed_s``. (Its
     100 deg shoulder bias is implausible: at the defaults the challenger belief restarts
     it at the first image, ``tests/test_challenger.py``; off here, to see this rule.)"""
     model, truth, frame = scene

@@ -357,7 +357,7 @@ class ImageProcessor:
         * it contradicts the estimate, or cannot see it, while it agrees with the
           encoders' arm, and on more pixels;
         * the estimate has put the arm out of view while the encoders put it in view
-          (``is_misplaced``) for ``health.restart_after_misplaced_s``. Measured: a second
+          (``is_misplaced``) for ``health.max_unconfirmed_s``. Measured: a second
           of images without the arm (the fault matrix's arm_out_of_view) moved the
           estimate out of view, which explains them best, and then no image could bring
           it back (840 mm 4 s after the arm returned).
@@ -381,8 +381,7 @@ class ImageProcessor:
         hide behind the scene at no cost: measured, s-full-arm with 8.6 deg of constant
         bias diverged to 0.9 m without this condition, and converged with it."""
         image = self.params.image
-        if not image.estimate_occlusion or \
-                predicted.see_through > self.params.health.max_see_through:
+        if predicted.see_through > self.params.health.max_see_through:
             return observation
         fraction = image_occlusion(predicted, image.likelihood, image.occlusion_prior_pixels)
         return with_pixel_occlusion(observation,

@@ -29,7 +29,7 @@ class JointArrays:
     ``kalman`` is what the Kalman bank runs (σb is 0 for a joint without bias);
     ``bias_process_std`` keeps each joint's own σb (rad/√s) for the plausibility of
     a bias. ``jump_rate_per_s`` is 0 where a joint's bias cannot jump (no bias, or in
-    the camera's kinematic chain unless ``image.bias_jumps_in_camera_chain``).
+    a camera's kinematic chain).
     ``initial_mean`` holds ``initial_positions_rad`` (0 elsewhere).
     """
 

@@ -6,7 +6,7 @@ from pydrake.common.yaml import yaml_dump_typed, yaml_load, yaml_load_typed
 
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.params.validation import validate_tracker_params
-from drake_tracker.params.yaml_fields import mismatched_field
+from drake_tracker.params.yaml_fields import mismatched_field, retired_field
 
 
 def load_tracker_params(path: str | Path | None = None) -> TrackerParams:
@@ -22,6 +22,9 @@ def load_tracker_params(path: str | Path | None = None) -> TrackerParams:
     raw = None
     try:
         raw = yaml_load(filename=str(path))
+        retired = retired_field(raw)
+        if retired:
+            raise ValueError(retired)
         if raw is not None:  # an empty file: all defaults
             params = yaml_load_typed(filename=str(path), defaults=params)
     except Exception as err:  # YAML syntax (yaml.YAMLError) or a field of the wrong type

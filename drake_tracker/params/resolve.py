@@ -57,9 +57,12 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
         return np.array([getattr(j, field) for j in noise], float)
 
     has_bias = np.array([j.has_bias for j in noise], bool)
-    jumps = has_bias.copy()
-    if not params.image.bias_jumps_in_camera_chain:
-        jumps &= np.array([name not in chain for name in names])
+    # No bias jumps on the joints that move a camera (a pan-tilt head): a jump there
+    # turns the whole view, and on s-head-arm with a time-varying arm bias it let the
+    # filter "explain" a misaligned arm by looking away from it (an unrendered robot
+    # scores 0 per pixel, a misaligned one less): 300 mm from then on. (The switch
+    # ``image.bias_jumps_in_camera_chain`` that allowed them is gone.)
+    jumps = has_bias & np.array([name not in chain for name in names])
     declared_jumps = column("bias_jump_rate_per_s")
     joints = JointArrays(
         names=tuple(names),

@@ -4,13 +4,43 @@
 for a scalar where a list is expected (``annealing_betas: 0.5`` gives "'float' object
 is not iterable") nor for a string where a float is expected (``duration_s: long``
 gives "could not convert string to float"). :func:`mismatched_field` walks the raw
-YAML against the defaults to name it.
+YAML against the defaults to name it. :func:`retired_field` names a field that an
+earlier version had and what replaced it.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Any
+
+#: Fields of earlier versions (YAML path) and what became of them.
+RETIRED_FIELDS = {
+    "health.lost_after_images": "replaced by health.images_in_a_row (one count for "
+                                "both ways)",
+    "health.recovered_after_images": "replaced by health.images_in_a_row (one count for "
+                                     "both ways)",
+    "health.reacquire_after_s": "replaced by health.max_unconfirmed_s (one duration for "
+                                "holding the arm and for restarting a misplaced estimate)",
+    "health.restart_after_misplaced_s": "replaced by health.max_unconfirmed_s (one "
+                                        "duration for holding the arm and for restarting "
+                                        "a misplaced estimate)",
+    "image.estimate_occlusion": "removed: the occlusion probability is always estimated "
+                                "(image.occlusion_prior_pixels)",
+    "image.bias_jumps_in_camera_chain": "removed: the joints that move a camera never "
+                                        "have bias jumps",
+}
+
+
+def retired_field(raw: Any) -> str | None:
+    """``"path: why"`` for the first field of ``raw`` (the YAML mapping of a
+    ``TrackerParams``) that :data:`RETIRED_FIELDS` lists, or None."""
+    if not isinstance(raw, dict):
+        return None
+    for path, why in RETIRED_FIELDS.items():
+        group, name = path.split(".")
+        if isinstance(raw.get(group), dict) and name in raw[group]:
+            return f"{path}: {why}"
+    return None
 
 
 def _mismatch(value: Any, default: Any) -> str | None:

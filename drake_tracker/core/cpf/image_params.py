@@ -70,21 +70,15 @@ class ImageParams:
     #: The near and far clipping planes of the particles' renderings (m).
     near_m: float = 0.1
     far_m: float = 6.0
-    #: Estimate each image's occlusion probability o (the likelihood's prior
+    #: Each image's occlusion probability o is estimated (the likelihood's prior
     #: ``likelihood.occlusion_probability`` is then the prior of that estimate): the
     #: fraction of the robot's pixels, rendered at the prior mean, that the image shows
-    #: hidden behind something nearer, with a Beta prior worth ``occlusion_prior_pixels``
-    #: pixels. With o fixed at 0.1, an image hiding 78 % of the arm made every hidden pixel
-    #: a 1-in-10 event, and configurations that put the arm out of sight (0 per pixel)
-    #: scored better than the truth: the estimate was dragged away (issue 17).
-    estimate_occlusion: bool = True
+    #: hidden behind something nearer, with a Beta prior worth this many pixels. With o
+    #: fixed at 0.1, an image hiding 78 % of the arm made every hidden pixel a 1-in-10
+    #: event, and configurations that put the arm out of sight (0 per pixel) scored
+    #: better than the truth: the estimate was dragged away (issue 17). (The switch
+    #: ``estimate_occlusion`` that turned it off is gone.)
     occlusion_prior_pixels: float = 20.0
-    #: Whether joints that move the camera (a pan-tilt head) may have bias jumps too
-    #: (``bias_jump_rate_per_s``). Off by default: a jump there turns the whole view, and
-    #: measured on s-head-arm with time-varying arm bias it let the filter "explain" a
-    #: misaligned arm by looking away from it (an unrendered robot scores 0 per pixel,
-    #: a misaligned one less): 300 mm from then on.
-    bias_jumps_in_camera_chain: bool = False
     #: A joint's bias jump is looked for only on an image with at least this many valid
     #: pixels that a jump of it (either way, by its std) would change, at the prior mean
     #: (``core/robustness/jump_visibility.py``; 0: always).

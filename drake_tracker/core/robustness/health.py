@@ -24,12 +24,12 @@ normalised innovation) and compared, pixel by pixel, with the image:
   out, ``core/robustness/second_opinion.py``): a wrong fold can explain the
   images, as example-robot-data's Panda showed, its arm hidden behind the observed one
   with 99 % of its unhidden pixels agreeing;
-* ``lost``: ``lost_after_images`` consecutive images disagreed (``see_through`` above
+* ``lost``: ``images_in_a_row`` consecutive images disagreed (``see_through`` above
   ``max_see_through``): the images keep contradicting the belief, and the filter has not
   re-acquired (one image that shows a bias step and is followed at once is one
   disagreement). A controller should fall back to the encoders.
 
-The state returns to ``tracking`` after ``recovered_after_images`` consistent images.
+The state returns to ``tracking`` after ``images_in_a_row`` consistent images.
 """
 
 
@@ -103,20 +103,21 @@ class HealthParams:
     min_robot_pixels: int = 30
     #: An image disagrees when more than this fraction of the robot is seen through.
     max_see_through: float = 0.25
-    #: Consecutive disagreeing images before ``lost`` (0.2 s at 10 images/s).
-    lost_after_images: int = 2
-    #: Consecutive consistent images before ``tracking`` again.
-    recovered_after_images: int = 2
-    #: The arm counts as acquired (``TrackerHealth.acquired``) while an image confirmed the
-    #: estimate within this long (s). After longer out of view or hidden, the images that
-    #: see it again are a new search (``image.acquisition_num_particles``, no bias jumps):
-    #: on in-out-in with a time-varying bias, the arm came back 150 mm from the estimate
-    #: after 4 s out of view, and 50 particles put it behind the scene (0.8 m).
-    reacquire_after_s: float = 1.0
-    #: The belief restarts from the encoders after the images have shown the estimate's
-    #: arm out of view, and the encoders' in view, for this long (s): see
-    #: ``ImageProcessor.restart_reason`` in ``core/image_step.py``.
-    restart_after_misplaced_s: float = 1.0
+    #: Images in a row that change the state: disagreeing ones before ``lost`` (0.2 s at
+    #: 10 images/s), consistent ones before ``tracking`` again. (It replaces
+    #: ``lost_after_images`` and ``recovered_after_images``, both 2.)
+    images_in_a_row: int = 2
+    #: The longest the tracker holds a belief that no image confirms (s). The arm counts
+    #: as acquired (``TrackerHealth.acquired``) while a ``tracking`` image came within it;
+    #: after longer out of view or hidden, the images that see it again are a new search
+    #: (``image.acquisition_num_particles``, no bias jumps): on in-out-in with a
+    #: time-varying bias, the arm came back 150 mm from the estimate after 4 s out of
+    #: view, and 50 particles put it behind the scene (0.8 m). And the belief restarts
+    #: from the encoders once the images have shown the estimate's arm out of view, and
+    #: the encoders' in view, for as long: see ``ImageProcessor.restart_reason`` in
+    #: ``core/image_processor.py``. (It replaces ``reacquire_after_s`` and
+    #: ``restart_after_misplaced_s``, both 1 s.)
+    max_unconfirmed_s: float = 1.0
     #: An estimate that renders fewer robot pixels than this fraction of the encoders'
     #: arm is misplaced (``is_misplaced``). Measured on s-head-arm/time-varying seed 0 (the
     #: occlusion-hold bias setting): after a bias step the estimate turned the head away
@@ -168,11 +169,8 @@ class HealthParams:
         checks = (
             ("min_robot_pixels", self.min_robot_pixels >= 1, "must be >= 1"),
             ("max_see_through", 0 < self.max_see_through < 1, "must be in (0, 1)"),
-            ("lost_after_images", self.lost_after_images >= 1, "must be >= 1"),
-            ("recovered_after_images", self.recovered_after_images >= 1, "must be >= 1"),
-            ("reacquire_after_s", self.reacquire_after_s > 0, "must be > 0"),
-            ("restart_after_misplaced_s", self.restart_after_misplaced_s >= 0,
-             "must be >= 0"),
+            ("images_in_a_row", self.images_in_a_row >= 1, "must be >= 1"),
+            ("max_unconfirmed_s", self.max_unconfirmed_s > 0, "must be > 0"),
             ("misplaced_fraction", 0 <= self.misplaced_fraction < 1, "must be in [0, 1)"),
             ("no_arm_see_through", self.max_see_through <= self.no_arm_see_through <= 1,
              "must be in [max_see_through, 1] (1: never skip)"),
@@ -221,7 +219,7 @@ class TrackerHealth:
     #: Time of the latest image that found the tracker ``tracking`` (s).
     confirmed_s: float = -float("inf")
     #: Whether an image confirmed the estimate (``tracking``) within
-    #: ``HealthParams.reacquire_after_s``: the tracker holds the arm.
+    #: ``HealthParams.max_unconfirmed_s``: the tracker holds the arm.
     acquired: bool = False
     #: Times the belief was restarted from the encoders (``ImageOutcome.restarted``).
     restarts: int = 0
@@ -288,9 +286,9 @@ def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,
 
 
 def restart_due(health: TrackerHealth, time_s: float, params: HealthParams) -> bool:
-    """Whether the estimate has been misplaced for ``restart_after_misplaced_s`` at
+    """Whether the estimate has been misplaced for ``max_unconfirmed_s`` at
     ``time_s`` (an image that is misplaced too)."""
-    return time_s - health.misplaced_since_s >= params.restart_after_misplaced_s
+    return time_s - health.misplaced_since_s >= params.max_unconfirmed_s
 
 
 def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthParams,
@@ -312,16 +310,16 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
         bad, good = health.disagreeing_in_a_row, 0
     elif image.see_through > params.max_see_through:
         bad, good = health.disagreeing_in_a_row + 1, 0
-        state = HealthState.LOST if bad >= params.lost_after_images else \
+        state = HealthState.LOST if bad >= params.images_in_a_row else \
             max(health.state, HealthState.UNCERTAIN)
     else:
         bad, good = 0, health.agreeing_in_a_row + 1
-        if health.state == HealthState.TRACKING or good >= params.recovered_after_images:
+        if health.state == HealthState.TRACKING or good >= params.images_in_a_row:
             state = HealthState.TRACKING
         else:
             state = health.state
     confirmed = image.time_s if state == HealthState.TRACKING else health.confirmed_s
-    acquired = image.time_s - confirmed <= params.reacquire_after_s
+    acquired = image.time_s - confirmed <= params.max_unconfirmed_s
     since = min(health.misplaced_since_s, image.time_s) if misplaced else float("inf")
     confirmed_twice = confirms(image, params) and (
         health.latest is None or confirms(health.latest, params))
