@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from test_tracker import small_params
 
+from drake_tracker.core.filter.estimate import estimate_from_belief
 from drake_tracker.core.render.kinematics import BatchedKinematics
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame
@@ -312,3 +313,36 @@ def test_a_camera_whose_pose_hides_the_arm_it_sees_restarts_its_own_pose_only():
         hidden = post.observe(DepthFrame(0.0, 0.01, plate, 1), prior)
         assert hidden.observation is None and not hidden.restarted
         assert "other cameras hold the arm" in hidden.skip_reason
+
+
+def test_the_estimate_gives_the_hand_in_every_cameras_frame_as_drake_computes_it(
+        two_cameras):
+    """``TrackerEstimate.X_WC_by_camera`` and ``X_CkE`` at the estimate's positions equal
+    Drake's ``CalcRelativeTransform`` there; the first camera's ``X_CkE`` is ``X_CE``."""
+    model = two_cameras
+    tracker = Tracker(model, params=small_params(), cameras={"camera": CAMERA, "post": CAMERA})
+    rng = np.random.default_rng(461)
+    n = len(model.robot_joint_names)
+    tracker.add_reading(0.0, rng.normal(0.0, 0.3, n))
+    tracker.add_reading(0.01, rng.normal(0.0, 0.3, n))
+    estimate = tracker.estimate()
+    q = estimate.positions.copy()
+    for name in model.camera_names:  # offsets away from 0, as after images
+        q[model.camera_joint_indices(name)] = rng.normal(0.0, [0.02] * 3 + [0.03] * 3)
+    belief = np.zeros((5, model.num_joints))
+    belief[0] = q
+    estimate = estimate_from_belief(model, tracker.readout, 0.01, belief)
+    plant = model.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    assert list(estimate.X_WC_by_camera) == ["camera", "post"]
+    for name in model.camera_names:
+        frame = model.camera(name).frame
+        X_WC = plant.CalcRelativeTransform(context, plant.world_frame(), frame)
+        np.testing.assert_allclose(estimate.X_WC_by_camera[name], X_WC.GetAsMatrix4(),
+                                   atol=1e-9)
+        X_CE = plant.CalcRelativeTransform(context, frame, model.end_effector_frame)
+        np.testing.assert_allclose(estimate.X_CkE(name), X_CE.GetAsMatrix4(), atol=1e-9)
+    np.testing.assert_allclose(estimate.X_CkE("camera"), estimate.X_CE, atol=1e-12)
+    with pytest.raises(ValueError, match="unknown camera 'side'.*'camera', 'post'"):
+        estimate.X_CkE("side")

@@ -45,9 +45,23 @@ class TrackerEstimate:
     #: Each camera's offset (name -> the six values of ``camera_offset``); the first
     #: camera's is ``camera_offset``.
     camera_offsets: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    #: Each camera's estimated pose in the model's world frame (name -> X_WC, 4x4); the
+    #: first camera's is ``X_WE @ inv(X_CE)``. With several cameras, the hand in camera
+    #: k's frame is :meth:`X_CkE` (k).
+    X_WC_by_camera: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
     #: Whether the images agree with the estimate (``core/robustness/health.py``): a controller
     #: should fall back to the encoders when ``health.state`` is ``HealthState.LOST``.
     health: TrackerHealth = TrackerHealth()
+
+    def X_CkE(self, camera: str) -> np.ndarray:
+        """The hand in camera ``camera``'s estimated frame (4x4): ``X_CE`` for the first
+        camera. A camera that sees the arm holds it there to its own images' accuracy
+        while the first camera may not see it (docs/evaluation.md, two cameras).
+        ValueError naming the cameras for an unknown one."""
+        if camera not in self.X_WC_by_camera:
+            raise ValueError(f"unknown camera '{camera}': the estimate's cameras are "
+                             f"{list(self.X_WC_by_camera)}")
+        return rigid_inverse(self.X_WC_by_camera[camera][None])[0] @ self.X_WE
 
 
 class PoseReadout:
@@ -65,7 +79,8 @@ class PoseReadout:
         self.kinematics = BatchedKinematics.from_plant(model.plant)
         self._world_tables = self.kinematics.frame_tables(model.plant.world_frame())
         self._frames = {}
-        for key, frame in (("C", model.camera_frame), ("E", model.end_effector_frame)):
+        for key, frame in (("C", model.camera_frame), ("E", model.end_effector_frame),
+                           *((("camera", c.name), c.frame) for c in model.cameras)):
             X_BF = np.asarray(frame.GetFixedPoseInBodyFrame().GetAsMatrix4(), float)
             self._frames[key] = (int(frame.body().index()), X_BF)
         self.body_poses(np.zeros(self.kinematics.num_positions))  # load the kernel now
@@ -84,9 +99,20 @@ class PoseReadout:
                            np.empty((4, 4)), np.empty((4, 4)))
         return X_WB
 
-    def poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(X_CE, X_WE, X_WC), each (N, 4, 4), for configurations q (N, n) or (n,)."""
-        X_WB = self.body_poses(np.atleast_2d(q))
+    def camera_poses(self, X_WB: np.ndarray) -> dict[str, np.ndarray]:
+        """Each camera's X_WC (N, 4, 4) from the body poses ``X_WB`` of
+        :meth:`body_poses`."""
+        out = {}
+        for camera in self.model.camera_names:
+            body, X_BC = self._frames[("camera", camera)]
+            out[camera] = X_WB[:, body] @ X_BC
+        return out
+
+    def poses(self, q: np.ndarray, X_WB: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(X_CE, X_WE, X_WC), each (N, 4, 4), for configurations q (N, n) or (n,)
+        (``X_WB``: their :meth:`body_poses`, when already computed)."""
+        X_WB = self.body_poses(np.atleast_2d(q)) if X_WB is None else X_WB
         body, X_BC = self._frames["C"]
         X_WC = X_WB[:, body] @ X_BC
         body, X_BE = self._frames["E"]
@@ -99,7 +125,9 @@ def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: floa
     """The :class:`TrackerEstimate` of a (5, n) ``belief`` at ``time_s``: its angle and bias
     moments, the virtual joints' angle means as the cameras' offsets, and the hand's poses
     X_CE and X_WE (4, 4) at the mean angles."""
-    X_CE, X_WE, _ = readout.poses(belief[MEAN_A])
+    X_WB = readout.body_poses(np.atleast_2d(belief[MEAN_A]))
+    X_CE, X_WE, _ = readout.poses(belief[MEAN_A], X_WB)
+    cameras = readout.camera_poses(X_WB)
     return TrackerEstimate(
         time_s=float(time_s),
         joint_names=list(model.joint_names),
@@ -112,4 +140,5 @@ def estimate_from_belief(model: TrackerModel, readout: PoseReadout, time_s: floa
                         for c in model.camera_names},
         X_CE=X_CE[0],
         X_WE=X_WE[0],
+        X_WC_by_camera={c: X[0] for c, X in cameras.items()},
     )
