@@ -134,3 +134,33 @@ def test_an_image_of_an_unknown_camera_in_a_log_is_warned_and_counted(two_camera
         counts = track_stream(iter(events), tracker)
     assert counts.source_skipped["unusable images"] == 12
     assert caplog.text.count("unknown camera 'side'") == 2  # the 1st and the 10th
+
+
+def test_each_cameras_pose_output_is_drakes_kinematics_of_the_belief(two_cameras, apollo):
+    """``<name>_X_WC`` of the bank system, at a belief whose offsets are away from 0,
+    equals Drake's ``CalcRelativeTransform`` from the world to that camera's frame."""
+    run = _run(apollo)
+    builder = DiagramBuilder()
+    source = builder.AddSystem(RecordedRunSource(run))
+    tracker = _add(builder, two_cameras, source, [
+        TrackerCamera(name, CAMERA, source.get_depth_frame_output_port(name))
+        for name in ("camera", "post")])
+    bank = tracker.kalman_bank
+    context = bank.CreateDefaultContext()
+    model = two_cameras
+    rng = np.random.default_rng(462)
+    q = rng.normal(0.0, 0.3, model.num_joints)
+    for name in model.camera_names:
+        q[model.camera_joint_indices(name)] = rng.normal(0.0, [0.02] * 3 + [0.03] * 3)
+    belief = bank.belief(context).copy()
+    belief[0] = q
+    context.SetDiscreteState(0, belief.reshape(-1))
+    plant = model.plant
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositions(plant_context, q)
+    for name in model.camera_names:
+        X_WC = plant.CalcRelativeTransform(plant_context, plant.world_frame(),
+                                           model.camera(name).frame)
+        np.testing.assert_allclose(
+            bank.GetOutputPort(f"{name}_X_WC").Eval(context).GetAsMatrix4(),
+            X_WC.GetAsMatrix4(), atol=1e-9)

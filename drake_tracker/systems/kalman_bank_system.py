@@ -142,17 +142,14 @@ class JointKalmanBankSystem(LeafSystem):
 
     def _declare_camera_outputs(self, model: TrackerModel, deps: set) -> None:
         """Each camera's ``<name>_camera_offset`` and ``<name>_X_WC`` outputs."""
-        self._camera_frames = {}
         for camera in model.cameras:
             indices = model.camera_joint_indices(camera.name)
             self._outputs[f"{camera.name}_camera_offset"] = self.DeclareVectorOutputPort(
                 f"{camera.name}_camera_offset", 6,
                 lambda c, o, k=indices: o.SetFromVector(self.belief(c)[MEAN_A, k]), deps)
-            X_BC = camera.frame.GetFixedPoseInBodyFrame().GetAsMatrix4()
-            self._camera_frames[camera.name] = (int(camera.frame.body().index()), X_BC)
         self._camera_poses = self.DeclareCacheEntry("camera_poses", ValueProducer(
             allocate=AbstractValue.Make({}).Clone, calc=self.CalcCameraPoses), deps)
-        for name in self._camera_frames:
+        for name in model.camera_names:
             self._outputs[f"{name}_X_WC"] = self.DeclareAbstractOutputPort(
                 f"{name}_X_WC", lambda: AbstractValue.Make(RigidTransform()),
                 lambda c, o, name=name: o.set_value(self._camera_poses.Eval(c)[name]), deps)
@@ -248,6 +245,6 @@ class JointKalmanBankSystem(LeafSystem):
     def CalcCameraPoses(self, context: Context, value: AbstractValue) -> None:
         """Each camera's estimated frame in the world (name -> X_WC) at the belief's mean
         angles."""
-        X_WB = self._readout.body_poses(self.belief(context)[MEAN_A])[0]
-        value.set_value({name: RigidTransform(X_WB[body] @ X_BC)
-                         for name, (body, X_BC) in self._camera_frames.items()})
+        X_WB = self._readout.body_poses(self.belief(context)[MEAN_A])
+        value.set_value({name: RigidTransform(X_WC[0])
+                         for name, X_WC in self._readout.camera_poses(X_WB).items()})
