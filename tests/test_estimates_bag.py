@@ -36,6 +36,7 @@ from drake_tracker.io.estimates_out import (  # noqa: E402
     JOINT_STATES_TOPIC,
     TF_TOPIC,
     EstimatesBag,
+    camera_hand_pose_topic,
     camera_tf_frames,
     stamp_ns,
     stamp_text,
@@ -78,12 +79,15 @@ def estimates(model, count=3, seed=5):
         X_CE = RigidTransform(Quaternion(wxyz / np.linalg.norm(wxyz)),
                               rng.normal(size=3)).GetAsMatrix4()
         first = model.camera_names[0]
+        X_WC = {name: RigidTransform(Quaternion(w / np.linalg.norm(w)),
+                                     rng.normal(size=3)).GetAsMatrix4()
+                for name, w in zip(model.camera_names, rng.normal(size=(4, 4)))}
         out.append(TrackerEstimate(
             time_s=0.05 * k, joint_names=list(model.joint_names), positions=q,
             position_variances=np.ones(model.num_joints), biases=np.zeros(model.num_joints),
             bias_variances=np.ones(model.num_joints), camera_offset=offsets[first].copy(),
-            X_CE=X_CE, X_WE=np.eye(4), camera_offsets=offsets,
-            health=HEALTHS[k % len(HEALTHS)]))
+            X_CE=X_CE, X_WE=X_WC[first] @ X_CE, camera_offsets=offsets,
+            X_WC_by_camera=X_WC, health=HEALTHS[k % len(HEALTHS)]))
     return out
 
 
@@ -128,11 +132,12 @@ def hand_under_tf(pose, tf):
     return t.header.frame_id, transform_of(t) @ pose_of(pose)
 
 
-def drake_hand_in_nominal(model, q):
-    """X_nominal_hand of the model's first camera at positions ``q``, by Drake."""
+def drake_hand_in_nominal(model, q, camera=0):
+    """X_nominal_hand of the model's camera ``camera`` (index; the first by default) at
+    positions ``q``, by Drake."""
     context = model.plant.CreateDefaultContext()
     model.plant.SetPositions(context, q)
-    return model.plant.CalcRelativeTransform(context, model.cameras[0].nominal_frame,
+    return model.plant.CalcRelativeTransform(context, model.cameras[camera].nominal_frame,
                                              model.end_effector_frame).GetAsMatrix4()
 
 
@@ -178,8 +183,10 @@ def test_each_cameras_offset_and_the_health_read_back(cameras, apollo, two_camer
     written = estimates(model)
     frame_ids = {name: FRAME_IDS[name] for name in model.camera_names}
     topics = bag_of(model, written, tmp_path / "estimates.mcap", frame_ids)
+    further = [camera_hand_pose_topic(name) for name in model.camera_names[1:]]
+    assert further == ([] if cameras == "one" else ["/tracker/post/hand_pose"])
     assert sorted(topics) == sorted([HAND_POSE_TOPIC, JOINT_STATES_TOPIC, TF_TOPIC,
-                                     HEALTH_TOPIC])
+                                     HEALTH_TOPIC, *further])
     stamps = [stamp_ns(BASE_NS, e.time_s) for e in written]
     for topic, messages in topics.items():
         assert [t for t, _ in messages] == stamps, topic
@@ -252,6 +259,16 @@ def test_the_hand_pose_under_tf_is_the_hand_in_the_input_camera_frame(
         expected = drake_hand_in_nominal(model, estimate.positions)
         np.testing.assert_allclose(X, expected, rtol=0, atol=1e-9)
         assert np.linalg.norm(pose_of(pose)[:3, 3] - expected[:3, 3]) > 1e-3
+    # Each further camera's hand pose, under /tf, is the hand in that camera's nominal
+    # frame by Drake's kinematics (the same positions).
+    for k, name in enumerate(model.camera_names[1:], 1):
+        for estimate, (_, pose), (_, tf) in zip(
+                written, topics[camera_hand_pose_topic(name)], topics[TF_TOPIC], strict=True):
+            assert pose.header.frame_id == f"{name}_estimated"
+            parent, X = hand_under_tf(pose, tf)
+            assert parent == FRAME_IDS[name]
+            np.testing.assert_allclose(X, drake_hand_in_nominal(model, estimate.positions, k),
+                                       rtol=0, atol=1e-9)
 
 
 def test_without_frame_ids_the_cameras_hang_from_the_model_frames(two_cameras, tmp_path):
@@ -280,3 +297,30 @@ def test_bad_frame_ids_are_named_before_the_bag_is_made(two_cameras, tmp_path, f
     with pytest.raises(error, match=fragment):
         EstimatesBag(tmp_path / "estimates.mcap", two_cameras, BASE_NS, frame_ids)
     assert not list(tmp_path.iterdir())
+
+
+def test_the_csv_has_the_hand_in_each_further_cameras_frame(two_cameras, tmp_path):
+    """``NAME_hand_*`` of ``estimates.csv``, read back, is the hand in camera ``NAME``'s
+    estimated frame by Drake's kinematics at the row's positions (themselves read back
+    from the CSV)."""
+    from drake_tracker.io.estimates_out import EstimatesCsv, read_estimates_csv
+
+    model = two_cameras
+    readout = PoseReadout(model)
+    rng = np.random.default_rng(12)
+    writer = EstimatesCsv(tmp_path / "estimates.csv", model, BASE_NS)
+    for k in range(3):
+        belief = np.zeros((5, model.num_joints))
+        belief[MEAN_A] = rng.normal(0.0, 0.3, model.num_joints)
+        writer.write(estimate_from_belief(model, readout, 0.1 * k, belief))
+    writer.close()
+    table = read_estimates_csv(tmp_path / "estimates.csv")
+    context = model.plant.CreateDefaultContext()
+    for row in range(3):
+        model.plant.SetPositions(context, positions_from_csv(model, table, row))
+        X = model.plant.CalcRelativeTransform(context, model.camera("post").frame,
+                                              model.end_effector_frame).GetAsMatrix4()
+        xyz = [table[f"post_hand_{c}"][row] for c in ("x_m", "y_m", "z_m")]
+        wxyz = [table[f"post_hand_{c}"][row] for c in ("qw", "qx", "qy", "qz")]
+        np.testing.assert_allclose(xyz, X[:3, 3], atol=1e-9)
+        np.testing.assert_allclose(Quaternion(wxyz).rotation(), X[:3, :3], atol=1e-9)

@@ -128,8 +128,9 @@ def test_tracking_the_bag_gives_the_estimates_of_the_run(recorded, capsys):
     a = read_estimates_csv(folder / "from_run" / "estimates.csv")
     b = read_estimates_csv(folder / "from_bag" / "estimates.csv")
     assert len(a["t_s"]) == len(run.reading_times_s)
-    offsets = [c for c in a if c.startswith("post_camera_")]
+    offsets = [c for c in a if c.startswith("post_camera_") and "_hand_" not in c]
     assert len(offsets) == 6 and np.any(a[offsets[0]] != 0.0)  # the second camera's own
+    assert len([c for c in a if c.startswith("post_camera_hand_")]) == 7  # the hand there
     for column in a:
         if column in ("health", "t0_s"):
             continue

@@ -12,7 +12,8 @@
 * ``camera_x_m, camera_y_m, camera_z_m, camera_rx_rad, camera_ry_rad, camera_rz_rad``:
   the estimated camera relative to the nominal one (with several cameras, the first's);
 * with several cameras, each further camera ``NAME``'s offset: ``NAME_x_m`` ...
-  ``NAME_rz_rad``.
+  ``NAME_rz_rad``, and the hand in its estimated frame (``TrackerEstimate.X_CkE``):
+  ``NAME_hand_x_m`` ... ``NAME_hand_qz``.
 
 ``estimates.mcap`` (with the ``ros`` extra) carries the same estimates as ROS 2 messages
 so Foxglove or RViz can overlay them on the input, one message per topic per estimate,
@@ -21,6 +22,9 @@ all stamped with the row's ``t_s``:
 * ``/tracker/hand_pose`` (``geometry_msgs/msg/PoseStamped``): X_CE, the hand in the
   first camera's estimated frame, its frame id that frame's: the first camera's child
   on ``/tf`` (``NAME_estimated``);
+* with several cameras, ``/tracker/NAME/hand_pose`` for each further camera ``NAME``:
+  the hand in that camera's estimated frame (frame id ``NAME_estimated``), which a camera
+  that sees the arm holds even where the first camera cannot see it;
 * ``/tracker/joint_states`` (``sensor_msgs/msg/JointState``): the estimated angles;
 * ``/tf`` (``tf2_msgs/msg/TFMessage``): each camera's estimated pose relative to its
   nominal one, one ``TransformStamped`` per camera from the input's frame id of the
@@ -75,6 +79,13 @@ POSE_COLUMNS = ("x_m", "y_m", "z_m", "qw", "qx", "qy", "qz")
 
 #: The bag's topics (see the module).
 HAND_POSE_TOPIC = "/tracker/hand_pose"
+
+
+def camera_hand_pose_topic(camera: str) -> str:
+    """The topic of the hand in a further camera ``camera``'s estimated frame."""
+    return f"/tracker/{camera}/hand_pose"
+
+
 JOINT_STATES_TOPIC = "/tracker/joint_states"
 TF_TOPIC = "/tf"
 HEALTH_TOPIC = "/tracker/health"
@@ -180,7 +191,8 @@ class EstimatesCsv:
                         *(f"{kind}_{n}_{u}" for n, u in zip(names, units)
                           for kind in ("angle", "bias")), *CAMERA_COLUMNS,
                         *(name + c.removeprefix("camera") for name in self._others
-                          for c in CAMERA_COLUMNS)]
+                          for c in CAMERA_COLUMNS),
+                        *(f"{name}_hand_{c}" for name in self._others for c in POSE_COLUMNS)]
         self._file = self.path.open("w", newline="")
         self._csv = csv.writer(self._file)
         self._csv.writerow(self.columns)
@@ -197,7 +209,9 @@ class EstimatesCsv:
                             *(repr(float(v)) for v in joint_values),
                             *(repr(float(v)) for v in estimate.camera_offset),
                             *(repr(float(v)) for name in self._others
-                              for v in estimate.camera_offsets[name])])
+                              for v in estimate.camera_offsets[name]),
+                            *(repr(float(v)) for name in self._others
+                              for v in pose_values(estimate.X_CkE(name)))])
         self.rows += 1
 
     def close(self) -> None:
@@ -271,6 +285,12 @@ class EstimatesBag:
                 (JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState"),
                 (TF_TOPIC, "tf2_msgs/msg/TFMessage"),
                 (HEALTH_TOPIC, "diagnostic_msgs/msg/DiagnosticArray")))
+        #: Each further camera's (name, its estimated frame, the connection of the hand
+        #: in that frame).
+        self._camera_hands = [
+            (name, child, self._writer.add_connection(
+                camera_hand_pose_topic(name), "geometry_msgs/msg/PoseStamped",
+                typestore=store)) for name, _, child in self.cameras[1:]]
         self.rows = 0
 
     def write(self, estimate: TrackerEstimate) -> None:
@@ -286,8 +306,10 @@ class EstimatesBag:
             for name, parent, child in self.cameras])
         level, text, values = health_status(estimate.health, self.base_ns)
         health = m.diagnostic_array(stamp, level, HEALTH_STATUS_NAME, text, values)
+        hands = [(connection, m.pose_stamped(stamp, child, pose_values(estimate.X_CkE(name))))
+                 for name, child, connection in self._camera_hands]
         for connection, message in ((self._pose, pose), (self._joints, joints),
-                                    (self._tf, tf), (self._health, health)):
+                                    (self._tf, tf), (self._health, health), *hands):
             self._writer.write(connection, stamp, m.serialize(message))
         self.rows += 1
 
