@@ -137,8 +137,9 @@ def test_an_image_of_an_unknown_camera_in_a_log_is_warned_and_counted(two_camera
 
 
 def test_each_cameras_pose_output_is_drakes_kinematics_of_the_belief(two_cameras, apollo):
-    """``<name>_X_WC`` of the bank system, at a belief whose offsets are away from 0,
-    equals Drake's ``CalcRelativeTransform`` from the world to that camera's frame."""
+    """``<name>_X_WC`` and ``<name>_X_CE`` of the bank system, at a belief whose offsets
+    are away from 0, equal Drake's ``CalcRelativeTransform`` from the world to that
+    camera's frame and from it to the hand; the first camera's ``X_CE`` is ``X_CE``."""
     run = _run(apollo)
     builder = DiagramBuilder()
     source = builder.AddSystem(RecordedRunSource(run))
@@ -164,3 +165,12 @@ def test_each_cameras_pose_output_is_drakes_kinematics_of_the_belief(two_cameras
         np.testing.assert_allclose(
             bank.GetOutputPort(f"{name}_X_WC").Eval(context).GetAsMatrix4(),
             X_WC.GetAsMatrix4(), atol=1e-9)
+        X_CE = plant.CalcRelativeTransform(plant_context, model.camera(name).frame,
+                                           model.end_effector_frame)
+        port = tracker.camera_hand_poses[name]
+        assert port.get_name() == f"{name}_X_CE"
+        np.testing.assert_allclose(port.Eval(context).GetAsMatrix4(), X_CE.GetAsMatrix4(),
+                                   atol=1e-9)
+    np.testing.assert_allclose(tracker.camera_hand_poses["camera"].Eval(context).GetAsMatrix4(),
+                               bank.GetOutputPort("X_CE").Eval(context).GetAsMatrix4(),
+                               atol=1e-12)

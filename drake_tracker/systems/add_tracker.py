@@ -106,10 +106,11 @@ class TrackerSystems:
     belief: OutputPort
     health: OutputPort
     #: Each camera's name -> its offset (the six virtual joints), its estimated frame in
-    #: the model's world (X_WC), its health and its image converter (None for a
-    #: DepthFrame port); with one camera, the model's first camera.
+    #: the model's world (X_WC), the hand in that frame (X_CE), its health and its image
+    #: converter (None for a DepthFrame port); with one camera, the model's first camera.
     camera_offsets: dict[str, OutputPort] = field(default_factory=dict)
     camera_poses: dict[str, OutputPort] = field(default_factory=dict)
+    camera_hand_poses: dict[str, OutputPort] = field(default_factory=dict)
     camera_health: dict[str, OutputPort] = field(default_factory=dict)
     depth_adapters: dict[str, DepthImageToFrame | None] = field(default_factory=dict)
 
@@ -233,6 +234,7 @@ def AddTracker(builder: DiagramBuilder, *args: Any,
         health=cpf.get_health_output_port(), **ports,
         camera_offsets=_per_camera(bank, names, "camera_offset", ports["camera_offset"]),
         camera_poses=_per_camera(bank, names, "X_WC", ports["X_WC"]),
+        camera_hand_poses=_per_camera(bank, names, "X_CE", ports["X_CE"]),
         camera_health={c: cpf.get_health_output_port(c) for c in names},
         depth_adapters=adapters)
 

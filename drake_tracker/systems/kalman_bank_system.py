@@ -92,9 +92,9 @@ class JointKalmanBankSystem(LeafSystem):
     model's world. Before the first reading the estimate is the zero configuration.
 
     With several cameras in ``model`` (``RobotConfig.cameras``), each camera ``<name>``
-    also has ``<name>_camera_offset`` (its six virtual joints) and ``<name>_X_WC`` (its
-    estimated frame in the model's world); ``camera_offset``, ``X_CE`` and ``X_WC`` are
-    the first camera's.
+    also has ``<name>_camera_offset`` (its six virtual joints), ``<name>_X_WC`` (its
+    estimated frame in the model's world) and ``<name>_X_CE`` (the hand in that frame);
+    ``camera_offset``, ``X_CE`` and ``X_WC`` are the first camera's.
 
     Discrete state: ``belief`` (:meth:`belief`), ``bookkeeping`` (:meth:`bookkeeping`)
     and ``bias_process_var`` (:meth:`bias_process_var`: the σb² the bank runs with, the
@@ -153,6 +153,11 @@ class JointKalmanBankSystem(LeafSystem):
             self._outputs[f"{name}_X_WC"] = self.DeclareAbstractOutputPort(
                 f"{name}_X_WC", lambda: AbstractValue.Make(RigidTransform()),
                 lambda c, o, name=name: o.set_value(self._camera_poses.Eval(c)[name]), deps)
+            self._outputs[f"{name}_X_CE"] = self.DeclareAbstractOutputPort(
+                f"{name}_X_CE", lambda: AbstractValue.Make(RigidTransform()),
+                lambda c, o, name=name: o.set_value(
+                    self._camera_poses.Eval(c)[name].InvertAndCompose(
+                        self._poses.Eval(c)[1])), deps)
 
     def get_reading_input_port(self) -> InputPort:
         """The ``reading`` input port."""
