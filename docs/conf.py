@@ -45,7 +45,8 @@ source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
 # The evaluation folders hold data (CSV, JSON, results) and the plots that pages show;
 # they are not pages themselves.
-exclude_patterns = ["_build", "evaluation_full", "evaluation_quick", "parameter_study.txt"]
+exclude_patterns = ["_build", "evaluation_full", "evaluation_quick", "evaluation_rerun",
+                    "parameter_study.txt"]
 
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence"]
 myst_heading_anchors = 3
