@@ -79,13 +79,6 @@ POSE_COLUMNS = ("x_m", "y_m", "z_m", "qw", "qx", "qy", "qz")
 
 #: The bag's topics (see the module).
 HAND_POSE_TOPIC = "/tracker/hand_pose"
-
-
-def camera_hand_pose_topic(camera: str) -> str:
-    """The topic of the hand in a further camera ``camera``'s estimated frame."""
-    return f"/tracker/{camera}/hand_pose"
-
-
 JOINT_STATES_TOPIC = "/tracker/joint_states"
 TF_TOPIC = "/tf"
 HEALTH_TOPIC = "/tracker/health"
@@ -93,6 +86,11 @@ HEALTH_TOPIC = "/tracker/health"
 HEALTH_STATUS_NAME = "drake_tracker/health"
 #: ``DiagnosticStatus.level`` of each health state: OK, WARN, ERROR.
 HEALTH_LEVELS = {HealthState.TRACKING: 0, HealthState.UNCERTAIN: 1, HealthState.LOST: 2}
+
+
+def camera_hand_pose_topic(camera: str) -> str:
+    """The topic of the hand in a further camera ``camera``'s estimated frame."""
+    return f"/tracker/{camera}/hand_pose"
 
 
 def stamp_ns(base_ns: int, time_s: float) -> int:

@@ -141,7 +141,8 @@ class JointKalmanBankSystem(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(period_s, offset_s, self._update)
 
     def _declare_camera_outputs(self, model: TrackerModel, deps: set) -> None:
-        """Each camera's ``<name>_camera_offset`` and ``<name>_X_WC`` outputs."""
+        """Each camera's ``<name>_camera_offset``, ``<name>_X_WC`` and ``<name>_X_CE``
+        outputs."""
         for camera in model.cameras:
             indices = model.camera_joint_indices(camera.name)
             self._outputs[f"{camera.name}_camera_offset"] = self.DeclareVectorOutputPort(
@@ -150,14 +151,11 @@ class JointKalmanBankSystem(LeafSystem):
         self._camera_poses = self.DeclareCacheEntry("camera_poses", ValueProducer(
             allocate=AbstractValue.Make({}).Clone, calc=self.CalcCameraPoses), deps)
         for name in model.camera_names:
-            self._outputs[f"{name}_X_WC"] = self.DeclareAbstractOutputPort(
-                f"{name}_X_WC", lambda: AbstractValue.Make(RigidTransform()),
-                lambda c, o, name=name: o.set_value(self._camera_poses.Eval(c)[name]), deps)
-            self._outputs[f"{name}_X_CE"] = self.DeclareAbstractOutputPort(
-                f"{name}_X_CE", lambda: AbstractValue.Make(RigidTransform()),
-                lambda c, o, name=name: o.set_value(
-                    self._camera_poses.Eval(c)[name].InvertAndCompose(
-                        self._poses.Eval(c)[1])), deps)
+            for k, kind in enumerate(("X_WC", "X_CE")):
+                self._outputs[f"{name}_{kind}"] = self.DeclareAbstractOutputPort(
+                    f"{name}_{kind}", lambda: AbstractValue.Make(RigidTransform()),
+                    lambda c, o, name=name, k=k: o.set_value(
+                        self._camera_poses.Eval(c)[name][k]), deps)
 
     def get_reading_input_port(self) -> InputPort:
         """The ``reading`` input port."""
@@ -248,8 +246,12 @@ class JointKalmanBankSystem(LeafSystem):
                               self._readout.poses(self.belief(context)[MEAN_A])))
 
     def CalcCameraPoses(self, context: Context, value: AbstractValue) -> None:
-        """Each camera's estimated frame in the world (name -> X_WC) at the belief's mean
-        angles."""
-        X_WB = self._readout.body_poses(self.belief(context)[MEAN_A])
-        value.set_value({name: RigidTransform(X_WC[0])
-                         for name, X_WC in self._readout.camera_poses(X_WB).items()})
+        """Each camera's estimated frame in the world and the hand in it (name -> (X_WC,
+        X_CE)) at the belief's mean angles, from one kinematics call."""
+        q = self.belief(context)[MEAN_A]
+        X_WB = self._readout.body_poses(q)
+        X_WE = RigidTransform(self._readout.poses(q, X_WB)[1][0])
+        cameras = {name: RigidTransform(X_WC[0])
+                   for name, X_WC in self._readout.camera_poses(X_WB).items()}
+        value.set_value({name: (X_WC, X_WC.InvertAndCompose(X_WE))
+                         for name, X_WC in cameras.items()})
