@@ -107,6 +107,16 @@ def test_an_image_that_does_not_confirm_the_estimate_reports_uncertain_and_nothi
         for field in ("disagreeing_in_a_row", "agreeing_in_a_row", "confirmed_s",
                       "acquired"):
             assert getattr(a, field) == getattr(b, field), (k, field)
+    # With three images in a row, the report asks three confirming images in a row too.
+    three = HealthParams(min_robot_pixels=10, tracking_agreement=0.9, images_in_a_row=3)
+    images = [close, close, close, close, off, close, close, close]
+    expected = ["U", "U", "T", "T", "U", "U", "U", "T"]
+    c = TrackerHealth()
+    for k, (image, state) in enumerate(zip(images, expected)):
+        image = ImageConsistency(0.1 * k, image.robot_pixels, image.agreement,
+                                 image.see_through, image.occluded)
+        c = next_health(c, image, three)
+        assert c.state.name[0] == state, k
     with pytest.raises(ValueError, match="tracking_agreement"):
         HealthParams(tracking_agreement=1.5).validate()
 

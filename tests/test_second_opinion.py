@@ -25,6 +25,7 @@ from drake_tracker.core.robustness.health import (
     ImageConsistency,
     TrackerHealth,
     is_surprising,
+    next_health,
 )
 from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
@@ -42,12 +43,26 @@ def test_an_image_is_surprising_when_its_unhidden_arm_mostly_disagrees():
     assert not is_surprising(ImageConsistency(0.0, 1000, 0.06, 0.0, occluded=0.9), params)
     # Too little unhidden arm to say anything.
     assert not is_surprising(ImageConsistency(0.0, 1000, 0.0, 0.5, occluded=0.98), params)
-    # With the image before: both must contradict (one is what a bias step looks like).
+    # After images before it: ``images_in_a_row`` of them in a row must contradict (one
+    # is what a bias step looks like), counted by the health over the images.
     surprising, agreeing = ImageConsistency(0.0, 900, 0.4, 0.1), ImageConsistency(0.0, 900,
                                                                                   0.9, 0.0)
-    assert is_surprising(surprising, params, previous=surprising)
-    assert not is_surprising(surprising, params, previous=agreeing)
-    assert not is_surprising(agreeing, params, previous=surprising)
+
+    def after(*images, p=params):
+        health = TrackerHealth()
+        for image in images:
+            health = next_health(health, image, p)
+        return health
+
+    assert is_surprising(surprising, params, after(surprising))
+    assert not is_surprising(surprising, params, after(agreeing))
+    assert not is_surprising(agreeing, params, after(surprising))
+    assert not is_surprising(surprising, params, after(surprising, agreeing))
+    three = HealthParams(images_in_a_row=3)
+    assert not is_surprising(surprising, three, after(agreeing, surprising, p=three))
+    assert is_surprising(surprising, three, after(agreeing, surprising, surprising, p=three))
+    one = HealthParams(images_in_a_row=1)
+    assert is_surprising(surprising, one, after(agreeing, p=one))
     never = HealthParams(second_opinion_agreement=0.0)
     assert not is_surprising(ImageConsistency(0.0, 900, 0.0, 0.9), never)
 

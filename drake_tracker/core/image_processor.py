@@ -276,7 +276,7 @@ class ImageProcessor:
         # (A restart above has cleared ``acquired``.) A second opinion from the encoders'
         # arm on an image that contradicts the held arm.
         if self.params.use_joint_readings and not restarted and acquired and \
-                is_surprising(predicted, self.params.health, health.latest):
+                is_surprising(predicted, self.params.health, health):
             overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
                                                   rng, frame.sequence)
         else:

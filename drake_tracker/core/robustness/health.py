@@ -103,9 +103,14 @@ class HealthParams:
     min_robot_pixels: int = 30
     #: An image disagrees when more than this fraction of the robot is seen through.
     max_see_through: float = 0.25
-    #: Images in a row that change the state: disagreeing ones before ``lost`` (0.2 s at
-    #: 10 images/s), consistent ones before ``tracking`` again. (It replaces
-    #: ``lost_after_images`` and ``recovered_after_images``, both 2.)
+    #: Images in a row that change the state or the course: disagreeing ones before
+    #: ``lost`` (0.2 s at 10 images/s), consistent ones before ``tracking`` again,
+    #: confirming ones before ``tracking`` is reported (``tracking_agreement``), and
+    #: surprising ones before a second opinion (``second_opinion_agreement``). One
+    #: image is never evidence enough: a bias step looks like a surprising image, and
+    #: the bias-jump prior follows it in that image. (It replaces ``lost_after_images``
+    #: and ``recovered_after_images``, both 2, and the fixed two images of the report
+    #: and the second opinion.)
     images_in_a_row: int = 2
     #: The longest the tracker holds a belief that no image confirms (s). The arm counts
     #: as acquired (``TrackerHealth.acquired``) while a ``tracking`` image came within it;
@@ -134,9 +139,10 @@ class HealthParams:
     no_arm_see_through: float = 0.9
 
     #: An acquired estimate whose unhidden arm agrees with fewer than this fraction of
-    #: its pixels in two images in a row (``is_surprising``) gets a second opinion: the start-up
-    #: search from the encoders' arm, adopted (a restart) when it explains the image
-    #: better by ``second_opinion_margin_nats_per_pixel``. 0: never.
+    #: its pixels in ``images_in_a_row`` images in a row (``is_surprising``) gets a
+    #: second opinion: the start-up search from the encoders' arm, adopted (a restart)
+    #: when it explains the image better by ``second_opinion_margin_nats_per_pixel``.
+    #: 0: never.
     second_opinion_agreement: float = 0.5
     #: The margin, in nats per valid pixel of the image: the log-likelihood sums over
     #: the valid pixels, so a margin that does not scale with them means a different
@@ -150,7 +156,8 @@ class HealthParams:
     challenger_bias_sigmas: float = 2.25
     #: Images a challenger searches for, then rests as long.
     challenger_images: int = 20
-    #: The state is reported ``tracking`` only while the latest two images each confirm
+    #: The state is reported ``tracking`` only while the latest ``images_in_a_row``
+    #: images each confirm
     #: (agree with, within 3σ of the pixel noise) at least this fraction of the robot
     #: pixels the estimate renders on valid image pixels (``confirms``); a pixel the
     #: image shows hidden confirms nothing. Below it, ``uncertain``: an arm partly
@@ -230,6 +237,17 @@ class TrackerHealth:
     challenger: Challenger | None = None
     #: The latest applied images' innovations (``core/robustness/innovation.py``).
     innovations: tuple[Innovation, ...] = ()
+    #: Images in a row, the latest included, that confirm the estimate (``confirms``).
+    confirming_in_a_row: int = 0
+    #: Images in a row, the latest included, that contradict most of the estimate's
+    #: unhidden arm (``contradicts``).
+    surprising_in_a_row: int = 0
+
+    def in_a_row(self, count: int, params: HealthParams) -> bool:
+        """Whether ``count`` images before this one, with this one, make
+        ``images_in_a_row`` (always, before the first image: there is nothing before it
+        to ask)."""
+        return self.latest is None or count + 1 >= params.images_in_a_row
 
 
 def is_consistent(image: ImageConsistency, params: HealthParams) -> bool:
@@ -261,19 +279,23 @@ def shows_no_arm(estimate: ImageConsistency, encoders: ImageConsistency,
                 > params.no_arm_see_through)
 
 
-def is_surprising(image: ImageConsistency, params: HealthParams,
-                  previous: ImageConsistency | None = None) -> bool:
+def contradicts(image: ImageConsistency, params: HealthParams) -> bool:
     """Whether an image contradicts much of the arm where the estimate puts it: of the
     robot pixels it does not show hidden (at least ``min_robot_pixels``), fewer than
-    ``second_opinion_agreement`` agree with the estimate's depth. With ``previous`` (the
-    image before, against the estimate then), both must: one such image is what a bias
-    step looks like, and the bias-jump prior follows it in that image; a second one in a
-    row means the update did not."""
-    def contradicts(c: ImageConsistency) -> bool:
-        visible = c.visible_robot_pixels
-        return visible >= params.min_robot_pixels and (
-            agreeing_pixels(c) < params.second_opinion_agreement * visible)
-    return contradicts(image) and (previous is None or contradicts(previous))
+    ``second_opinion_agreement`` agree with the estimate's depth."""
+    visible = image.visible_robot_pixels
+    return visible >= params.min_robot_pixels and (
+        agreeing_pixels(image) < params.second_opinion_agreement * visible)
+
+
+def is_surprising(image: ImageConsistency, params: HealthParams,
+                  health: TrackerHealth | None = None) -> bool:
+    """Whether an image ``contradicts`` the estimate and, with ``health`` (the state
+    after the images before it), closes ``images_in_a_row`` such images in a row: one
+    is what a bias step looks like, and the bias-jump prior follows it in that image;
+    more in a row mean the update did not."""
+    return contradicts(image, params) and (
+        health is None or health.in_a_row(health.surprising_in_a_row, params))
 
 
 def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,
@@ -318,18 +340,19 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
             state = HealthState.TRACKING
         else:
             state = health.state
-    confirmed = image.time_s if state == HealthState.TRACKING else health.confirmed_s
-    acquired = image.time_s - confirmed <= params.max_unconfirmed_s
+    confirmed_s = image.time_s if state == HealthState.TRACKING else health.confirmed_s
+    acquired = image.time_s - confirmed_s <= params.max_unconfirmed_s
     since = min(health.misplaced_since_s, image.time_s) if misplaced else float("inf")
-    confirmed_twice = confirms(image, params) and (
-        health.latest is None or confirms(health.latest, params))
-    if state == HealthState.TRACKING and (challenger is not None or not confirmed_twice):
+    confirming = health.confirming_in_a_row + 1 if confirms(image, params) else 0
+    surprising = health.surprising_in_a_row + 1 if contradicts(image, params) else 0
+    confirmed = confirming > 0 and health.in_a_row(health.confirming_in_a_row, params)
+    if state == HealthState.TRACKING and (challenger is not None or not confirmed):
         # The image does not see through the estimate, but does not confirm it either
         # (``tracking_agreement``), or it does while the estimate's biases are
         # implausible: it may be a wrong fold that explains them. Reported only: the arm
         # still counts as confirmed (``confirmed_s``, ``acquired``) and the next image's
-        # state does not depend on it (an internal TRACKING has at least two agreeing
-        # images in a row).
+        # state does not depend on it (an internal TRACKING has at least
+        # ``images_in_a_row`` agreeing images in a row).
         state = HealthState.UNCERTAIN
     innovations = health.innovations
     if innovation is not None:
@@ -339,5 +362,5 @@ def next_health(health: TrackerHealth, image: ImageConsistency, params: HealthPa
             # than its model allows (a bias stepping or drifting faster than its model,
             # a wrong mode being followed): reported only, like the case above.
             state = HealthState.UNCERTAIN
-    return TrackerHealth(state, image, bad, good, confirmed, acquired, health.restarts, since,
-                         challenger, innovations)
+    return TrackerHealth(state, image, bad, good, confirmed_s, acquired, health.restarts, since,
+                         challenger, innovations, confirming, surprising)
