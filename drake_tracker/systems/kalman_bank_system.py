@@ -129,14 +129,15 @@ class JointKalmanBankSystem(LeafSystem):
                 name, n, lambda c, o, row=row: o.SetFromVector(self.belief(c)[row]), deps)
         self._outputs["camera_offset"] = self.DeclareVectorOutputPort(
             "camera_offset", 6, self.CalcCameraOffset, deps)
+        self._several_cameras = len(model.cameras) > 1
         self._poses = self.DeclareCacheEntry("poses", ValueProducer(
-            allocate=AbstractValue.Make((RigidTransform(),) * 3).Clone,
+            allocate=AbstractValue.Make(((RigidTransform(),) * 3, {})).Clone,
             calc=self.CalcPoses), deps)
         for k, name in enumerate(_POSES):
             self._outputs[name] = self.DeclareAbstractOutputPort(
                 name, lambda: AbstractValue.Make(RigidTransform()),
-                lambda c, o, k=k: o.set_value(self._poses.Eval(c)[k]), deps)
-        if len(model.cameras) > 1:
+                lambda c, o, k=k: o.set_value(self._poses.Eval(c)[0][k]), deps)
+        if self._several_cameras:
             self._declare_camera_outputs(model, deps)
         self.DeclarePeriodicDiscreteUpdateEvent(period_s, offset_s, self._update)
 
@@ -148,14 +149,12 @@ class JointKalmanBankSystem(LeafSystem):
             self._outputs[f"{camera.name}_camera_offset"] = self.DeclareVectorOutputPort(
                 f"{camera.name}_camera_offset", 6,
                 lambda c, o, k=indices: o.SetFromVector(self.belief(c)[MEAN_A, k]), deps)
-        self._camera_poses = self.DeclareCacheEntry("camera_poses", ValueProducer(
-            allocate=AbstractValue.Make({}).Clone, calc=self.CalcCameraPoses), deps)
         for name in model.camera_names:
             for k, kind in enumerate(("X_WC", "X_CE")):
                 self._outputs[f"{name}_{kind}"] = self.DeclareAbstractOutputPort(
                     f"{name}_{kind}", lambda: AbstractValue.Make(RigidTransform()),
                     lambda c, o, name=name, k=k: o.set_value(
-                        self._camera_poses.Eval(c)[name][k]), deps)
+                        self._poses.Eval(c)[1][name][k]), deps)
 
     def get_reading_input_port(self) -> InputPort:
         """The ``reading`` input port."""
@@ -241,17 +240,16 @@ class JointKalmanBankSystem(LeafSystem):
         output.SetFromVector(self.belief(context)[MEAN_A, self._virtual])
 
     def CalcPoses(self, context: Context, value: AbstractValue) -> None:
-        """X_CE, X_WE and X_WC of the belief's mean angles."""
-        value.set_value(tuple(RigidTransform(X[0]) for X in
-                              self._readout.poses(self.belief(context)[MEAN_A])))
-
-    def CalcCameraPoses(self, context: Context, value: AbstractValue) -> None:
-        """Each camera's estimated frame in the world and the hand in it (name -> (X_WC,
-        X_CE)) at the belief's mean angles, from one kinematics call."""
+        """X_CE, X_WE and X_WC of the belief's mean angles and, with several cameras,
+        each camera's estimated frame in the world and the hand in it (name -> (X_WC,
+        X_CE)), from one kinematics call."""
         q = self.belief(context)[MEAN_A]
         X_WB = self._readout.body_poses(q)
-        X_WE = RigidTransform(self._readout.poses(q, X_WB)[1][0])
-        cameras = {name: RigidTransform(X_WC[0])
-                   for name, X_WC in self._readout.camera_poses(X_WB).items()}
-        value.set_value({name: (X_WC, X_WC.InvertAndCompose(X_WE))
-                         for name, X_WC in cameras.items()})
+        poses = tuple(RigidTransform(X[0]) for X in self._readout.poses(q, X_WB))
+        cameras = {}
+        if self._several_cameras:
+            X_WE = poses[1]
+            for name, X_WC in self._readout.camera_poses(X_WB).items():
+                X_WC = RigidTransform(X_WC[0])
+                cameras[name] = (X_WC, X_WC.InvertAndCompose(X_WE))
+        value.set_value((poses, cameras))
