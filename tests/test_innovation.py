@@ -117,6 +117,8 @@ def test_the_health_reports_an_inconsistent_filter_as_uncertain_without_forgetti
     # Tracking again once the bad image has left the window (or the pooled sum allows it).
     assert states[-1] == HealthState.TRACKING
     assert HealthState.UNCERTAIN in states[:-1]
-    # Without innovations (an image that was not applied) the state is the pixels' alone.
-    assert next_health(TrackerHealth(HealthState.TRACKING, agree[0], 0, 3), agree[1],
+    # Without innovations (an image that was not applied) the state is the pixels' alone
+    # (the image before confirmed the estimate too: one of two in a row).
+    assert next_health(TrackerHealth(HealthState.TRACKING, agree[0], 0, 3,
+                                     confirming_in_a_row=1), agree[1],
                        params).state == HealthState.TRACKING
