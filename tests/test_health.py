@@ -215,28 +215,25 @@ def test_the_search_uses_acquisition_particles_until_the_arm_is_acquired(apollo,
     assert all(n == (20 if acquired else 60) for acquired, n in used)
 
 
-def _seen(robot_pixels, see_through):
-    return ImageConsistency(1.0, robot_pixels, 1.0 - see_through, see_through)
+def _seen(robot_pixels, see_through, agreement=None):
+    agreement = 1.0 - see_through if agreement is None else agreement
+    return ImageConsistency(1.0, robot_pixels, agreement, see_through)
 
 
 @pytest.mark.parametrize("acquired, estimate, encoders, expected", [
-    (True, (700, 1.0), (650, 0.95), True),  # the arm is in neither place: skipped
-    (False, (700, 1.0), (650, 0.95), False),  # before acquisition: the search's image
+    (True, (700, 1.0), (650, 0.97), True),  # the arm is in neither place: skipped
+    (True, (700, 0.6, 0.0), (650, 0.3, 0.02), True),  # the rest hidden: still no arm
+    (False, (700, 1.0), (650, 0.97), False),  # before acquisition: the search's image
     (True, (700, 1.0), (650, 0.5), False),  # the encoders' arm is there: a bias step
     (True, (700, 0.5), (650, 1.0), False),  # the estimate's arm is partly there
     (True, (20, 1.0), (650, 1.0), False),  # too few of the estimate's pixels to say
-    (True, (700, 0.9), (650, 1.0), False),  # at the threshold: not above it
+    # 30 agreeing pixels (min_robot_pixels) show the arm: not skipped
+    (True, (700, 1.0), (600, 0.95), False),
+    # an occluder hides both (nearer, not seen through): not skipped
+    (True, (700, 0.1, 0.0), (650, 0.2, 0.0), False),
 ])
 def test_an_image_shows_no_arm_only_where_neither_arm_is_seen(acquired, estimate, encoders,
                                                                 expected):
     health = TrackerHealth(acquired=acquired)
     got = shows_no_arm(_seen(*estimate), _seen(*encoders), health, HealthParams())
     assert got is expected
-
-
-def test_no_arm_see_through_is_validated():
-    with pytest.raises(ValueError, match="health.no_arm_see_through"):
-        HealthParams(no_arm_see_through=0.2).validate()  # below max_see_through
-    with pytest.raises(ValueError, match="health.no_arm_see_through"):
-        HealthParams(no_arm_see_through=1.5).validate()
-    HealthParams(no_arm_see_through=1.0).validate()
