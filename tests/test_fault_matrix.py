@@ -23,7 +23,7 @@ every test asserts that
   occlusion).
 
 The arm vanishing from the images while the encoders say it is in view (background-only
-images for 1 s) withholds data too: such images are skipped (``health.no_arm_see_through``).
+images for 1 s) withholds data too: such images are skipped (``shows_no_arm``).
 Before that check it was an ``xfail``: one of them swung the estimate 570 mm to put the
 arm out of view, and the restart from the encoders that followed ended 190-340 mm off.
 With the check of far-future stamps disabled (``StreamClock.future_limit_s`` infinite),
