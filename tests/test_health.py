@@ -222,12 +222,14 @@ def _seen(robot_pixels, see_through, agreement=None):
 
 @pytest.mark.parametrize("acquired, estimate, encoders, expected", [
     (True, (700, 1.0), (650, 0.97), True),  # the arm is in neither place: skipped
-    (True, (700, 0.6, 0.0), (650, 0.3, 0.02), True),  # the rest hidden: still no arm
+    # nothing agrees, but the image shows something nearer than either arm (the arm
+    # itself, in front of both): not skipped
+    (True, (700, 0.6, 0.0), (650, 0.3, 0.02), False),
     (False, (700, 1.0), (650, 0.97), False),  # before acquisition: the search's image
     (True, (700, 1.0), (650, 0.5), False),  # the encoders' arm is there: a bias step
     (True, (700, 0.5), (650, 1.0), False),  # the estimate's arm is partly there
     (True, (20, 1.0), (650, 1.0), False),  # too few of the estimate's pixels to say
-    # 30 agreeing pixels (min_robot_pixels) show the arm: not skipped
+    # 30 pixels (min_robot_pixels) not seen through: not skipped
     (True, (700, 1.0), (600, 0.95), False),
     # an occluder hides both (nearer, not seen through): not skipped
     (True, (700, 0.1, 0.0), (650, 0.2, 0.0), False),

@@ -226,10 +226,8 @@ class ImageProcessor:
                 return ImageOutcome(None, None, predicted, challenger=health.challenger,
                                     skip_reason=(
                     f"it sees through {predicted.see_through:.0%} of the arm where the "
-                    f"estimate puts it and {encoders.see_through:.0%} where the encoders do, "
-                    f"and confirms {agreeing_pixels(predicted):.0f} and "
-                    f"{agreeing_pixels(encoders):.0f} of their pixels: no arm where one must "
-                    f"be (a moved camera, or a stale or foreign frame)"))
+                    f"estimate puts it and {encoders.see_through:.0%} where the encoders do: "
+                    f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
         if self.several_cameras and not restarted and \
                 predicted.visible_robot_pixels < self.params.health.min_robot_pixels:
             remounted = self._remounted(prior, observed, predicted)

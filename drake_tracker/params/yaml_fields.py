@@ -28,10 +28,9 @@ RETIRED_FIELDS = {
                                 "(image.occlusion_prior_pixels)",
     "image.bias_jumps_in_camera_chain": "removed: the joints that move a camera never "
                                         "have bias jumps",
-    "health.no_arm_see_through": "removed: an image shows no arm when fewer than "
-                                 "health.min_robot_pixels of either the estimate's or the "
-                                 "encoders' arm agree and it sees through more than "
-                                 "health.max_see_through of both",
+    "health.no_arm_see_through": "removed: an image shows no arm when it sees behind "
+                                 "all but fewer than health.min_robot_pixels of both the "
+                                 "estimate's and the encoders' rendered arm",
 }
 
 
