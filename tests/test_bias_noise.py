@@ -146,20 +146,27 @@ def test_a_copy_of_the_buffer_keeps_its_own_rate():
 
 
 def test_only_an_image_that_confirms_a_tracked_belief_informs_the_rate():
-    """``confirms_tracking``: tracked before, and this image agrees (one more agreeing
-    image in a row, none disagreeing); an observation marked otherwise moves no rate."""
+    """``confirms_tracking``: tracked before (``images_in_a_row`` agreeing images in a
+    row), and this image agrees (one more, none disagreeing); an observation marked
+    otherwise moves no rate. The reported state does not decide: it says ``uncertain``
+    when the innovations outgrow the model, the very images the match learns from."""
     from dataclasses import replace
 
     from drake_tracker.core.image_step import confirms_tracking
-    from drake_tracker.core.robustness.health import HealthState, TrackerHealth
+    from drake_tracker.core.robustness.health import HealthParams, HealthState, TrackerHealth
 
+    params = HealthParams()  # images_in_a_row 2
     tracked = TrackerHealth(HealthState.TRACKING, agreeing_in_a_row=3)
     agreeing = replace(tracked, agreeing_in_a_row=4)
-    assert confirms_tracking(tracked, agreeing)
-    assert confirms_tracking(tracked, replace(agreeing, state=HealthState.UNCERTAIN))
+    assert confirms_tracking(tracked, agreeing, params)
+    assert confirms_tracking(tracked, replace(agreeing, state=HealthState.UNCERTAIN), params)
+    # reported uncertain (inconsistent innovations), but tracked: it counts
+    assert confirms_tracking(replace(tracked, state=HealthState.UNCERTAIN), agreeing, params)
     assert not confirms_tracking(tracked, replace(agreeing, agreeing_in_a_row=0,
-                                                  disagreeing_in_a_row=1))
-    assert not confirms_tracking(replace(tracked, state=HealthState.UNCERTAIN), agreeing)
+                                                  disagreeing_in_a_row=1), params)
+    # one agreeing image before this one is not yet tracking
+    once = TrackerHealth(HealthState.UNCERTAIN, agreeing_in_a_row=1)
+    assert not confirms_tracking(once, replace(once, agreeing_in_a_row=2), params)
     match = BiasNoiseMatch.start(np.array([MIN_VAR]), np.array([1.0]), np.array([True]))
     match = match.after_image(0.0, _prior(0.0, 1e-4), _observation(0.0, 1e-4))
     far = replace(_observation(1.0, 1e-4), informs_bias_noise=False)
