@@ -45,7 +45,7 @@ source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
 # The evaluation folders hold data (CSV, JSON, results) and the plots that pages show;
 # they are not pages themselves.
-exclude_patterns = ["_build", "evaluation_full", "evaluation_quick", "evaluation_rerun",
+exclude_patterns = ["_build", "evaluation_full", "evaluation_quick",
                     "parameter_study.txt"]
 
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence"]
