@@ -239,6 +239,12 @@ class TrackerHealth:
         to ask)."""
         return self.latest is None or count + 1 >= params.images_in_a_row
 
+    def tracked(self, params: HealthParams) -> bool:
+        """The health's own ``tracking``: ``images_in_a_row`` consistent images in a row
+        at least, whatever the report's stricter tests (``tracking_agreement``, the
+        innovations) made of ``state``."""
+        return self.agreeing_in_a_row >= params.images_in_a_row
+
 
 def is_consistent(image: ImageConsistency, params: HealthParams) -> bool:
     """Whether an image sees enough of the rendered arm (``min_robot_pixels``) and does
