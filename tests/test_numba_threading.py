@@ -18,10 +18,14 @@ from drake_tracker.core.jit.numba_threading import (
 
 
 @pytest.fixture
-def two_numba_threads():
-    """Two numba threads for the test (skipped where numba has one), restored after."""
+def two_numba_threads(monkeypatch):
+    """Two numba threads for the test (skipped where numba has one), restored after; the
+    process's costs measured so far (by the suite's trackers) are hidden from it."""
+    from drake_tracker.core.jit import numba_threading
+
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba has one thread here: the policy is always serial")
+    monkeypatch.setattr(numba_threading, "_latest_costs", {False: (), True: ()})
     previous = numba.get_num_threads()
     numba.set_num_threads(2)
     yield
@@ -174,16 +178,40 @@ def test_the_first_call_of_each_compilation_is_not_measured(two_numba_threads, m
     policy.record(True, 0.6, 10)
     assert policy.cost_per_item == {False: 0.1, True: 0.06}
     assert policy.use_parallel() is True
-    # The warm-up is the process's, not each policy's: a second policy (another
-    # tracker's renderer) measures its first call of each compilation, so its first
-    # image runs one serial sweep, not two serial and an unmeasured parallel one.
+    # The warm-up is the process's, not each policy's, and so are the costs: a second
+    # policy (another tracker's renderer) starts from the process's latest costs, so its
+    # first image runs parallel at once, not a serial sweep to learn what is known.
     second = SerialOrParallel(window=1, warmup_calls=1)
-    assert second.use_parallel() is False
-    second.record(False, 2.0, 10)
-    assert second.cost_per_item[False] == 0.2 and second.use_parallel() is True
-    second.record(True, 0.5, 10)
-    assert second.cost_per_item == {False: 0.2, True: 0.05}
+    assert second.cost_per_item == {False: 0.1, True: 0.06}
+    assert second.use_parallel() is True
+    second.record(True, 0.5, 10)  # its own measurement replaces the inherited one
+    assert second.cost_per_item == {False: 0.1, True: 0.05}
     assert [second.use_parallel() for _ in range(3)] == [True] * 3
+    # Where the process found serial cheaper, a new policy starts serial.
+    second.record(True, 2.0, 10)
+    third = SerialOrParallel(window=1, warmup_calls=1)
+    assert third.cost_per_item == {False: 0.1, True: 0.2} and third.use_parallel() is False
+
+
+def test_a_new_policy_keeps_the_process_window(two_numba_threads, monkeypatch):
+    """The inherited costs are calls of the window: one slow parallel call at a new
+    tracker's start (the machine busy) does not flip it to serial; a lasting one does."""
+    from drake_tracker.core.jit import numba_threading
+
+    monkeypatch.setattr(numba_threading, "_calls_in_process", {False: 9, True: 9})
+    first = SerialOrParallel(window=5, warmup_calls=1)
+    first.record(False, 1.0, 10)
+    for _ in range(5):
+        first.record(True, 0.4, 10)
+    second = SerialOrParallel(window=5, warmup_calls=1)
+    assert second.cost_per_item == {False: 0.1, True: 0.04}
+    assert second.use_parallel()
+    second.record(True, 1.2, 10)  # slowed: 0.12 per item, dearer than serial's 0.1
+    assert second.use_parallel() and second.cost_per_item[True] == 0.04
+    for _ in range(4):
+        second.record(True, 1.2, 10)
+    assert second.cost_per_item[True] == pytest.approx(0.12) and not second.use_parallel()
+    assert first.cost_per_item[True] == 0.04  # each policy's window is its own
 
 
 def test_a_forked_child_warms_up_afresh(monkeypatch):
@@ -191,10 +219,12 @@ def test_a_forked_child_warms_up_afresh(monkeypatch):
     from drake_tracker.core.jit import numba_threading
 
     monkeypatch.setattr(numba_threading, "_calls_in_process", {False: 7, True: 9})
+    monkeypatch.setattr(numba_threading, "_latest_costs", {False: (1.0,), True: (0.5,)})
     # (restored after the test: this process is no fork)
     monkeypatch.setattr(numba_threading, "_forked_after_unsafe_start", False)
     numba_threading._after_fork_in_child()
     assert numba_threading._calls_in_process == {False: 0, True: 0}
+    assert numba_threading._latest_costs == {False: (), True: ()}
 
 
 def test_one_thread_is_always_serial():

@@ -76,6 +76,11 @@ _forked_after_unsafe_start = False
 #: once per process, so only a process's first calls are warm-up calls.
 _calls_in_process = {False: 0, True: 0}
 
+#: The latest costs per item of each compilation measured in this process (the window
+#: of the policy that last recorded one): a new :class:`SerialOrParallel` (a new
+#: tracker's renderer) starts from them.
+_latest_costs: dict[bool, tuple[float, ...]] = {False: (), True: ()}
+
 
 def _after_fork_in_child() -> None:
     """In a forked child: remembers whether the parent had started a fork-unsafe layer
@@ -83,6 +88,7 @@ def _after_fork_in_child() -> None:
     global _forked_after_unsafe_start
     from numba.np.ufunc import parallel
     _calls_in_process.update({False: 0, True: 0})
+    _latest_costs.update({False: (), True: ()})
     if parallel._is_initialized and numba.threading_layer() in FORK_UNSAFE_LAYERS:
         _forked_after_unsafe_start = True
 
@@ -134,15 +140,26 @@ class SerialOrParallel:
         process, not per policy: each tracker's renderer has its own policy, and with
         warm-up calls of its own, a new tracker in a warmed-up process ran its first
         search's four sweeps serial, serial, parallel unmeasured, parallel; the search
-        took 121-195 ms against 52-84 ms for the next two on two threads."""
+        took 121-195 ms against 52-84 ms for the next two on two threads.
+
+        A policy starts from the window of costs the process last measured (any
+        policy's), and measures serial first only in a process that measured nothing: a
+        new tracker in a warmed-up process ran its first sweep serial to learn what the
+        process already knew, and its first search took 81-100 ms against 44-58 ms for
+        the next one (the demo's sensors held to real time, two threads, Zen 5), beyond a
+        30 Hz camera's 80 ms deadline. The inherited costs stay in the window until its
+        own calls push them out: inheriting the least costs alone, one parallel sweep
+        slowed at a run's start (12 µs per evaluation against 4-6) flipped the new policy
+        to serial for 64 sweeps."""
         self.probe_every = int(probe_every)
         self.max_probe_every = max(int(max_probe_every), self.probe_every)
         self.probe_interval = self.probe_every
         self.window = max(1, int(window))
-        self._recent: dict[bool, deque[float]] = {b: deque(maxlen=self.window)
-                                                   for b in (False, True)}
+        self._recent: dict[bool, deque[float]] = {
+            b: deque(_latest_costs[b], maxlen=self.window) for b in (False, True)}
         self.warmup_calls = int(warmup_calls)
-        self.cost_per_item: dict[bool, float | None] = {False: None, True: None}
+        self.cost_per_item: dict[bool, float | None] = {
+            b: min(self._recent[b]) if self._recent[b] else None for b in (False, True)}
         self._calls = 0
 
     def use_parallel(self) -> bool:
@@ -170,6 +187,7 @@ class SerialOrParallel:
         before = self._parallel_is_faster()
         self._recent[parallel].append(cost)
         self.cost_per_item[parallel] = min(self._recent[parallel])
+        _latest_costs[parallel] = tuple(self._recent[parallel])
         after = self._parallel_is_faster()
         if before is None or after is None:
             return
