@@ -145,7 +145,7 @@ class SerialOrParallel:
         A policy starts from the window of costs the process last measured (any
         policy's), and measures serial first only in a process that measured nothing: a
         new tracker in a warmed-up process ran its first sweep serial to learn what the
-        process already knew, and its first search took 81-100 ms against 44-58 ms for
+        process already knew, and its first search took 81-103 ms against 44-75 ms for
         the next one (the demo's sensors held to real time, two threads, Zen 5), beyond a
         30 Hz camera's 80 ms deadline. The inherited costs stay in the window until its
         own calls push them out: inheriting the least costs alone, one parallel sweep
