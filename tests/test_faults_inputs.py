@@ -61,6 +61,19 @@ def test_a_bad_field_is_named_with_its_file(tmp_path, loader, text, message):
     assert str(err.value).startswith(f"{path}: ") and message in str(err.value)
 
 
+def test_the_command_line_names_a_bad_file_once(tmp_path):
+    """The loaders' errors begin with the path, and the command line named it again."""
+    from drake_tracker.cli.args import UsageError, load_params_arg, resolve_scenario
+
+    params = write(tmp_path, "bad.yaml", "health:\n  no_arm_see_through: 0.9\n")
+    scenario = write(tmp_path, "scene.yaml", "duration_s: long\n")
+    for call, path, message in ((load_params_arg, params, "no_arm_see_through: removed"),
+                                (resolve_scenario, scenario, "(expected a number)")):
+        with pytest.raises(UsageError) as err:
+            call(str(path))
+        assert str(err.value).count(str(path)) == 1 and message in str(err.value)
+
+
 def test_an_empty_scenario_file_gives_the_default_scenario(tmp_path):
     scenario = load_scenario(write(tmp_path, "mine.yaml", ""))
     assert scenario.name == "mine" and scenario.duration_s > 0

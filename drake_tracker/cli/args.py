@@ -97,7 +97,8 @@ def resolve_scenario(text: str) -> Scenario:
     except FileNotFoundError:
         raise UsageError(f"scenario file '{text}' does not exist") from None
     except (ValueError, RuntimeError, KeyError) as err:
-        raise UsageError(f"scenario '{text}': {_one_line(err)}") from None
+        message = _one_line(err).removeprefix(f"{Path(name)}: ")  # named once, above
+        raise UsageError(f"scenario '{text}': {message}") from None
 
 
 def load_params_arg(path: str | None) -> TrackerParams:
@@ -112,7 +113,9 @@ def load_params_arg(path: str | None) -> TrackerParams:
     try:
         return load_tracker_params(path)
     except (ValueError, RuntimeError, TypeError, KeyError) as err:
-        raise UsageError(f"parameter file '{path}': {_one_line(err)}") from None
+        message = _one_line(err)  # the loader's errors begin with the path: once is enough
+        message = message.removeprefix(f"{Path(path)}: ") if path is not None else message
+        raise UsageError(f"parameter file '{path}': {message}") from None
 
 
 def check_params_for_model(params: TrackerParams, model: TrackerModel, where: str) -> None:
