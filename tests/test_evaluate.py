@@ -15,6 +15,7 @@ from drake_tracker.evaluation import (
     plot_results,
     summarize,
     task_base_params,
+    tasks,
     write_summary,
 )
 from drake_tracker.evaluation.methods import METHODS, method_params
@@ -69,6 +70,7 @@ def test_the_task_seed_reaches_the_tracker(monkeypatch):
         raise RuntimeError("stop here")
 
     monkeypatch.setattr(offline, "replay_run", fake_replay)
+    monkeypatch.setattr(tasks, "_kernels_loaded", True)
     model = build_tracker_model(robot_preset("apollo"))
     run = synthetic_run(model, duration_s=0.2, bias_rad=0.0, seed=1)
     from drake_tracker.params.tracker_params import TrackerParams
@@ -79,6 +81,33 @@ def test_the_task_seed_reaches_the_tracker(monkeypatch):
         with pytest.raises(RuntimeError, match="stop here"):
             evaluate_run(run, ("full_fusion",), base_params=base, tracker_seed=tracker_seed)
     assert seen == [40, 42]
+
+
+def test_a_process_loads_the_kernels_before_its_first_replay_only(monkeypatch):
+    """A worker's first task paid for loading (or compiling) the kernels inside its image
+    updates and decision: they are loaded before, once per process, and timed apart."""
+    import drake_tracker.io.replay as offline
+    import drake_tracker.kernel_warm_up as warm_up
+
+    calls, order = [], []
+    monkeypatch.setattr(tasks, "_kernels_loaded", False)
+    monkeypatch.setattr(warm_up, "warm_up_tracker_kernels",
+                        lambda model, camera, params: calls.append((model, camera)) or 7.0)
+
+    def fake_replay(run, params, model, sample_times_s):
+        order.append(len(calls))
+        raise RuntimeError("stop here")
+
+    monkeypatch.setattr(offline, "replay_run", fake_replay)
+    model = build_tracker_model(robot_preset("apollo"))
+    run = synthetic_run(model, duration_s=0.2, bias_rad=0.0, seed=1)
+    first, second = {}, {}
+    for wall_s in (first, second):
+        with pytest.raises(RuntimeError, match="stop here"):
+            evaluate_run(run, ("full_fusion",), wall_s=wall_s)
+    assert len(calls) == 1 and calls[0][1] == run.camera_intrinsics
+    assert order == [1, 1]  # loaded before the first replay, not again
+    assert first == {"kernel_warm_up": 7.0} and second == {}
 
 
 def _write_fake_results(out_dir, seeds=(0,), sequences=("s-full-arm", "occlusion")):
