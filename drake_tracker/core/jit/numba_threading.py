@@ -150,7 +150,9 @@ class SerialOrParallel:
         30 Hz camera's 80 ms deadline. The inherited costs stay in the window until its
         own calls push them out: inheriting the least costs alone, one parallel sweep
         slowed at a run's start (12 µs per evaluation against 4-6) flipped the new policy
-        to serial for 64 sweeps."""
+        to serial for 64 sweeps. The inherited costs may come from another workload (a
+        robot with more triangles, another image size): a choice they make wrongly lasts
+        until ``window`` of this policy's own calls of that compilation replace them."""
         self.probe_every = int(probe_every)
         self.max_probe_every = max(int(max_probe_every), self.probe_every)
         self.probe_interval = self.probe_every
