@@ -97,8 +97,7 @@ def resolve_scenario(text: str) -> Scenario:
     except FileNotFoundError:
         raise UsageError(f"scenario file '{text}' does not exist") from None
     except (ValueError, RuntimeError, KeyError) as err:
-        message = _one_line(err).removeprefix(f"{Path(name)}: ")  # named once, above
-        raise UsageError(f"scenario '{text}': {message}") from None
+        raise UsageError(f"scenario '{text}': {_one_line(err, named=name)}") from None
 
 
 def load_params_arg(path: str | None) -> TrackerParams:
@@ -113,9 +112,7 @@ def load_params_arg(path: str | None) -> TrackerParams:
     try:
         return load_tracker_params(path)
     except (ValueError, RuntimeError, TypeError, KeyError) as err:
-        message = _one_line(err)  # the loader's errors begin with the path: once is enough
-        message = message.removeprefix(f"{Path(path)}: ") if path is not None else message
-        raise UsageError(f"parameter file '{path}': {message}") from None
+        raise UsageError(f"parameter file '{path}': {_one_line(err, named=path)}") from None
 
 
 def check_params_for_model(params: TrackerParams, model: TrackerModel, where: str) -> None:
@@ -203,6 +200,10 @@ def check_out_dir(path: str) -> Path:
     return out
 
 
-def _one_line(err: BaseException) -> str:
+def _one_line(err: BaseException, named: str | Path | None = None) -> str:
+    """``err``'s message on one line, at most 300 characters; without the leading
+    ``"<named>: "`` of a loader that names its file, when the caller names it already."""
     text = " ".join(str(err).split())
+    if named is not None:
+        text = text.removeprefix(f"{Path(named)}: ")
     return text if len(text) <= 300 else text[:297] + "..."
