@@ -15,7 +15,6 @@ from drake_tracker.evaluation import (
     plot_results,
     summarize,
     task_base_params,
-    tasks,
     write_summary,
 )
 from drake_tracker.evaluation.methods import METHODS, method_params
@@ -62,6 +61,7 @@ def test_evaluate_run_orders_the_methods_on_a_biased_run():
 
 def test_the_task_seed_reaches_the_tracker(monkeypatch):
     import drake_tracker.io.replay as offline
+    import drake_tracker.kernel_warm_up as warm_up
 
     seen = []
 
@@ -70,7 +70,7 @@ def test_the_task_seed_reaches_the_tracker(monkeypatch):
         raise RuntimeError("stop here")
 
     monkeypatch.setattr(offline, "replay_run", fake_replay)
-    monkeypatch.setattr(tasks, "_kernels_loaded", True)
+    monkeypatch.setattr(warm_up, "_loaded_in_process", True)
     model = build_tracker_model(robot_preset("apollo"))
     run = synthetic_run(model, duration_s=0.2, bias_rad=0.0, seed=1)
     from drake_tracker.params.tracker_params import TrackerParams
@@ -90,7 +90,7 @@ def test_a_process_loads_the_kernels_before_its_first_replay_only(monkeypatch):
     import drake_tracker.kernel_warm_up as warm_up
 
     calls, order = [], []
-    monkeypatch.setattr(tasks, "_kernels_loaded", False)
+    monkeypatch.setattr(warm_up, "_loaded_in_process", False)
     monkeypatch.setattr(warm_up, "warm_up_tracker_kernels",
                         lambda model, camera, params: calls.append((model, camera)) or 7.0)
 

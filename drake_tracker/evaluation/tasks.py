@@ -158,29 +158,6 @@ def protocol_params(run: RecordedRun, method: str, min_image_interval_s: float,
     return params
 
 
-#: Whether this process has loaded the tracker's numba kernels (:func:`_load_kernels_once`).
-_kernels_loaded = False
-
-
-def _load_kernels_once(run: RecordedRun, model: object, params: TrackerParams,
-                       wall_s: dict[str, float] | None) -> None:
-    """Loads (on a machine's first run, compiles) the tracker's kernels before this
-    process's first replay, so that no replay's times include them: a worker's first
-    task took 27 s of image updates and 12 s of decision against 3.9 and 0.12 s for the
-    next ones (a fresh worktree's first quick suite, Zen 5 VM), and the decision's share
-    of the quick suite read 11.6 % instead of 8.9 %. Their time goes into
-    ``wall_s["kernel_warm_up"]``, so a task's wall times still add up to its cost."""
-    global _kernels_loaded
-    if _kernels_loaded:
-        return
-    from drake_tracker.kernel_warm_up import warm_up_tracker_kernels
-
-    seconds = warm_up_tracker_kernels(model, run.camera_intrinsics, params)
-    _kernels_loaded = True
-    if wall_s is not None:
-        wall_s["kernel_warm_up"] = seconds
-
-
 def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s: float = 0.0,
                  sample_period_s: float = SAMPLE_PERIOD_S,
                  base_params: TrackerParams | None = None,
@@ -192,10 +169,12 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
 
     ``tracker_seed`` is added to the parameters' ``image.seed``. Returns
     {method: {"times_s", "translation_mm", "rotation_deg"}}; each method's wall time
-    goes into ``wall_s`` if given, and each tracking method's image times
-    (``ReplayResult.decision_times``) into ``decision_times``.
+    goes into ``wall_s`` if given (and, before this process's first replay, the
+    kernels' loading into ``wall_s["kernel_warm_up"]``), and each tracking method's
+    image times (``ReplayResult.decision_times``) into ``decision_times``.
     """
     from drake_tracker.io.replay import encoders_only_X_CE, model_for_run, replay_run
+    from drake_tracker.kernel_warm_up import warm_up_once
 
     model = model_for_run(run)
     times = _sample_times(run, sample_period_s)
@@ -214,7 +193,11 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
         else:
             params = protocol_params(run, method, min_image_interval_s, base_params,
                                      tracker_seed)
-            _load_kernels_once(run, model, params, wall_s)
+            # the kernels loaded before this process's first replay, timed apart, so
+            # that no replay's times include them (kernel_warm_up.warm_up_once)
+            warm_up_s = warm_up_once(model, run.camera_intrinsics, params)
+            if warm_up_s is not None and wall_s is not None:
+                wall_s["kernel_warm_up"] = warm_up_s
             start = time.perf_counter()
             replay = replay_run(run, params, model, sample_times_s=times)
             X, health = replay.X_CE, replay.health
