@@ -82,10 +82,11 @@ def implausible_biases(prior: np.ndarray, plausible_std: np.ndarray,
 def challenger_prior(candidate: np.ndarray, challenger: Challenger | None, time_s: float,
                      growth_var_per_s: np.ndarray) -> np.ndarray:
     """The challenger's (5, n) prior at ``time_s``: the restart's belief ``candidate``
-    (the encoders' arm, angle variance the tracker's initial one) shifted by the
-    challenger's offset, its angle variance the offset's grown by the bias random walk
-    since its last image, never above the restart's; a new challenger's is the
-    restart's. Measured on the protocol's occlusion/time-varying runs, median / p75
+    (the encoders' arm; its angle variance the start's, conditioned on the reading)
+    shifted by the challenger's offset, its angle variance the offset's grown by the
+    bias random walk since its last image, never above the restart's; a new
+    challenger's is the restart's. (The search reads the angle marginals only.)
+    Measured on the protocol's occlusion/time-varying runs, median / p75
     from 5 s, tracker seed 0: simulation seed 0 10.1 / 47.4 mm (the code before: 47.3 /
     383.2), simulation seed 1 6.6 / 49.4; starting instead as wide as the bias prior
     (5.7 deg, as the tracker's start effectively is), 13.6 / 51.6 and 17.3 / 133.5."""
