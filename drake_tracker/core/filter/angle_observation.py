@@ -19,7 +19,6 @@ from drake_tracker.core.filter.kalman import (
     MEAN_B,
     VAR_A,
     VAR_B,
-    held_reading,
     recombine_with_bias,
 )
 
@@ -28,15 +27,19 @@ from drake_tracker.core.filter.kalman import (
 class Restart:
     """Forgets a belief that the images showed wrong: each joint's angle goes to where
     the encoders put it with the bias mean added back (``a + b``: for a robot joint, its
-    reading's angle at zero bias), the bias to 0, and the variances to ``angle_var`` and
-    ``bias_var`` (the tracker's start), independent, then conditioned on the reading the
-    angle came from (``kalman.held_reading``, the encoder's ``reading_var``), as the
-    bank's first reading conditions the start. Without that step an image applied after
-    the restart moved the angle and not the bias, and the next reading (the angle's
-    random walk σa lets it follow its encoder) took the angle back to the zero-bias arm:
-    measured on s-full-arm/time-varying seed 0 of the quick suite, a search that
-    explained the image better (4,813 against 3,808 nats) left the hand 112-123 mm off
-    until the next image, 36 mm before it.
+    reading's angle at zero bias), within the start's angle variance ``angle_var`` (A);
+    the bias is forgotten (a flat prior), so given the reading it is whatever the angle
+    leaves: ``b = (a + b) - a``, mean 0, ``var_b = A + σq²``, ``cov_ab = -A`` (σq² the
+    encoder's ``reading_var``). A joint without bias (``bias_var`` 0) keeps a zero bias
+    and its angle takes the reading: ``var_a = A σq² / (A + σq²)``.
+
+    The image after a restart then sets the bias as well as the angle (eq. 16), and the
+    next reading keeps the image's angle. A restart that left the angle and the bias
+    independent (``cov_ab`` 0, ``var_b`` the start's) lost the image's answer: the next
+    reading (the angle's random walk σa lets it follow its encoder) took the angle back
+    to the zero-bias arm. Measured on s-full-arm/time-varying seed 0 of the quick suite,
+    a search that explained the image better (4,813 against 3,808 nats) left the hand
+    112-123 mm off until the next image, 36 mm before it.
 
     A virtual camera joint's reading is always 0, so there ``a + b`` is 0, the nominal
     camera, unless ``pinned_angle`` (n,) sets its angle (NaN: not pinned): a pinned
@@ -59,7 +62,8 @@ class Restart:
     #: the joints a camera's images leave, ``ResolvedParams.left_joints_for``: another
     #: camera's offset is not this camera's to forget).
     untouched: np.ndarray | None = None
-    #: Each joint's encoder variance σq² (n,) (None: an exact reading).
+    #: Each joint's encoder variance σq² (n,) (None: an exact reading; 0 where a joint
+    #: without bias would then have no angle variance left).
     reading_var: np.ndarray | None = None
 
     def pinned(self, angle: np.ndarray | None) -> Restart:
@@ -72,11 +76,9 @@ class Restart:
 
     def apply(self, prior: np.ndarray) -> np.ndarray:
         """The restarted (5, n) belief: angle means ``a + b`` of ``prior`` (or the pinned
-        angle), bias means 0 (or ``a + b`` minus the pinned angle), variances
-        ``angle_var`` and ``bias_var`` conditioned on the reading ``a + b``: with
-        S = A + B + σq², var_a = A (B + σq²) / S, cov_ab = -A B / S, var_b =
-        B (A + σq²) / S. With ``keep_bias``, ``prior`` with a bias step of variance
-        ``bias_var`` (see the class)."""
+        angle), bias means 0 (or ``a + b`` minus the pinned angle), ``var_a = A``,
+        ``cov_ab = -A``, ``var_b = A + σq²`` (see the class); with ``keep_bias``,
+        ``prior`` with a bias step of variance ``bias_var``."""
         if self.keep_bias:
             kept = np.array(prior, float, copy=True)
             kept[VAR_A] += self.bias_var
@@ -91,10 +93,12 @@ class Restart:
             pin = np.isfinite(self.pinned_angle)
             restarted[MEAN_B, pin] = restarted[MEAN_A, pin] - self.pinned_angle[pin]
             restarted[MEAN_A, pin] = self.pinned_angle[pin]
-        restarted[VAR_A] = self.angle_var
-        restarted[VAR_B] = self.bias_var
-        restarted = held_reading(restarted, np.zeros(prior.shape[1]) if self.reading_var
-                                 is None else self.reading_var)
+        A = np.asarray(self.angle_var, float)
+        R = 0.0 if self.reading_var is None else np.asarray(self.reading_var, float)
+        biased = np.asarray(self.bias_var) > 0
+        restarted[VAR_A] = np.where(biased, A, A * R / (A + R))
+        restarted[COV_AB] = np.where(biased, -A, 0.0)
+        restarted[VAR_B] = np.where(biased, A + R, 0.0)
         if self.untouched is not None and len(self.untouched):
             restarted[:, self.untouched] = prior[:, self.untouched]
         return restarted

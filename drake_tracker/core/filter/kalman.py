@@ -251,18 +251,6 @@ class JointKalmanBank:
         _step_inplace(moments, dt, reading, self._coef)
 
 
-def held_reading(moments: np.ndarray, reading_var: np.ndarray) -> np.ndarray:
-    """``moments`` (5, n) conditioned on an encoder reading that equals their own
-    prediction ``a + b`` (model 3, innovation 0, variance ``reading_var`` (n,)): the means
-    stay, the covariances take the reading's constraint on ``a + b``. A belief built
-    without a reading (angle and bias independent) becomes the one the bank would hold
-    right after that reading."""
-    out = np.array(moments, float, copy=True)
-    _update_inplace(out, out[MEAN_A] + out[MEAN_B],
-                    np.ascontiguousarray(reading_var, dtype=float))
-    return out
-
-
 def recombine_with_bias(moments: np.ndarray, mean_post: np.ndarray,
                         var_post: np.ndarray) -> np.ndarray:
     """Eq. (16): new angle marginals (μ', s') combined with p(b | a) from the prior.
