@@ -62,8 +62,8 @@ class Restart:
     #: the joints a camera's images leave, ``ResolvedParams.left_joints_for``: another
     #: camera's offset is not this camera's to forget).
     untouched: np.ndarray | None = None
-    #: Each joint's encoder variance σq² (n,) (None: an exact reading; 0 where a joint
-    #: without bias would then have no angle variance left).
+    #: Each joint's encoder variance σq² (n,) (None: exact readings, which leave a joint
+    #: without bias no angle variance).
     reading_var: np.ndarray | None = None
 
     def pinned(self, angle: np.ndarray | None) -> Restart:

@@ -82,7 +82,7 @@ def implausible_biases(prior: np.ndarray, plausible_std: np.ndarray,
 def challenger_prior(candidate: np.ndarray, challenger: Challenger | None, time_s: float,
                      growth_var_per_s: np.ndarray) -> np.ndarray:
     """The challenger's (5, n) prior at ``time_s``: the restart's belief ``candidate``
-    (the encoders' arm; its angle variance the start's, conditioned on the reading)
+    (the encoders' arm; its angle variance the start's, its bias given the reading)
     shifted by the challenger's offset, its angle variance the offset's grown by the
     bias random walk since its last image, never above the restart's; a new
     challenger's is the restart's. (The search reads the angle marginals only.)
