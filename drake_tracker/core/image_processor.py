@@ -141,11 +141,10 @@ class ImageProcessor:
                                 joints.initial_bias_std, joints.has_bias)
         # The variances of the start; another camera's joints are kept as they are.
         left = params.left_joints_for(camera_name)
-        reading_var = joints.kalman.encoder_noise_std ** 2
         self.restart = Restart(start[VAR_A], start[VAR_B],
                                untouched=left if len(left) else None,
-                               reading_var=reading_var)
-        #: With several cameras: a restart of this camera's own pose alone (its six
+                               reading_var=joints.kalman.encoder_noise_std ** 2)
+        #: With several cameras: the restart of this camera's own pose alone (its six
         #: offset joints and the joints that move only it), every other joint kept.
         self.remount = None
         if self.several_cameras:
@@ -154,8 +153,7 @@ class ImageProcessor:
                 i for i, name in enumerate(joints.names)
                 if name in params.camera_chain and i not in others}
             kept = np.array([i for i in range(len(joints.names)) if i not in own], np.int64)
-            self.remount = Restart(start[VAR_A], start[VAR_B], untouched=kept,
-                                   reading_var=reading_var)
+            self.remount = replace(self.restart, untouched=kept)
         self.update = CpfImageUpdate(
             model, camera, list(params.blocks_for(camera_name)), im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
