@@ -39,6 +39,7 @@ def test_the_bench_command_writes_its_documented_figures(tmp_path, capsys):
     # runs of the same code on 2026-11-28).
     assert all(p["paced"] and math.isfinite(p["real_time_factor_after_1s"])
                and p["real_time_factor_after_1s"] > 0 for p in paced.values())
+    assert all(p["max_lag_behind_real_time_s"] >= 0 for p in paced.values())
     assert paced["every_frame"]["min_image_interval_s"] == 0.0
     cases = result["decision"]["cases"]  # the demo's scenario and the suite's hard cases
     assert len(cases) == 4 and all(c["images"] > 0 and c["update_s"] > 0 for c in cases.values())

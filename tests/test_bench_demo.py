@@ -11,6 +11,7 @@ from drake_tracker.bench.realtime import (
     bench_tracker_alone,
     format_demo,
     format_tracker_alone,
+    max_lag_behind_real_time_s,
     record_demo_sensors,
 )
 from drake_tracker.core.sensors.camera import stride_for_width
@@ -49,6 +50,33 @@ def test_bench_tracker_alone_reports_the_tracker_on_recorded_sensors():
     text = format_tracker_alone(result)
     assert "tracker alone" in text and "images applied per s" in text
     assert f"({result['updates_late_searches']} of them searches)" in text
+    # The largest lag over its simulated seconds and its end, from its first mark (0 s).
+    assert math.isfinite(result["max_lag_behind_real_time_s"])
+    assert result["max_lag_behind_real_time_s"] >= 0.0
+    assert "behind real time" in text
+
+
+def _marks(walls: list[float]) -> list[tuple]:
+    """``add_second_marks``'s marks at simulated 0, 1, 2, ... s with these wall times."""
+    return [(float(t), wall, 0.0, 0.0) for t, wall in enumerate(walls)]
+
+
+def test_the_lag_behind_real_time_keeps_a_stall_the_real_time_factor_hides():
+    """A paced Simulator that stalls for 1 s in its first second and then catches up
+    (wall times 10, 12, 13, 14, end at 4 s simulated at 14.5 s): its real-time factor
+    after the first second reads 1.2, faster than real time, while it was 1 s behind
+    real time at its first second. The lag is measured from the first mark."""
+    marks = _marks([10.0, 12.0, 13.0, 14.0])
+    end = (4.0, 14.5)
+    factor_after_1s = (end[0] - 1.0) / (end[1] - marks[1][1])
+    assert factor_after_1s == pytest.approx(1.2)
+    assert max_lag_behind_real_time_s(marks, end) == pytest.approx(1.0)
+    # On time throughout, or ahead of real time (unpaced): no lag.
+    assert max_lag_behind_real_time_s(_marks([0.0, 1.0, 2.0]), (2.5, 2.5)) == 0.0
+    assert max_lag_behind_real_time_s(_marks([0.0, 0.5, 1.0]), (2.0, 1.5)) == 0.0
+    # Behind only at the end: the end counts.
+    assert max_lag_behind_real_time_s(_marks([0.0, 1.0, 2.0]), (2.5, 3.25)) == \
+        pytest.approx(0.75)
 
 
 def test_bench_reading_path_reports_what_each_joint_reading_costs():

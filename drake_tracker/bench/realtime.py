@@ -31,6 +31,20 @@ def add_second_marks(builder: DiagramBuilder, marks: list) -> None:
         (context.get_time(), time.perf_counter(), time.thread_time(), time.process_time())))
 
 
+def max_lag_behind_real_time_s(marks: list, end: tuple[float, float]) -> float:
+    """The largest lag of the simulated clock behind the wall clock (s): over the
+    ``marks`` of :func:`add_second_marks` (the first at simulated time 0) and ``end``
+    (simulated s, wall s), the most wall time elapsed beyond the simulated time
+    elapsed. A Simulator held to real time never runs ahead (about 0 while it keeps
+    up); one that fell behind shows by how much, which its real-time factor hides once
+    it has caught up (it then runs faster than real time: a 1 s stall at 0.95 s read
+    as a factor of 1.9 from 1 s to 3 s). 0 when it never fell behind the first mark's
+    pace, or ran ahead of real time (an unpaced one)."""
+    points = [(t, wall) for t, wall, *_ in marks] + [tuple(end)]
+    t0, wall0 = points[0]
+    return max((wall - wall0) - (t - t0) for t, wall in points)
+
+
 def bench_demo(params: TrackerParams, duration_s: float) -> dict:
     """The demo's real-time factor on its first ``duration_s`` (see the module doc)."""
     from drake_tracker.demo.run import (
@@ -106,6 +120,8 @@ def bench_tracker_alone(params: TrackerParams, duration_s: float,
     return {"scenario": DEFAULT_SCENARIO, "duration_s": run.duration_s, "paced": paced,
             "min_image_interval_s": params.image.min_image_interval_s,
             "real_time_factor_after_1s": span / (end[0] - start[1]),
+            "max_lag_behind_real_time_s": max_lag_behind_real_time_s(
+                marks, (run.duration_s, end[0])),
             "main_thread_cpu_s_per_s": main_cpu,
             "other_threads_cpu_s_per_s": (end[2] - start[3]) / span - main_cpu,
             "images_applied_per_s": state.images_applied / run.duration_s,
@@ -130,7 +146,8 @@ def format_tracker_alone(alone: dict) -> str:
     update = "no update" if update is None else f"{update:.0f} ms of wall time each"
     return (f"tracker alone on the demo's recorded sensors (first {alone['duration_s']:g} s): "
             f"real-time factor {alone['real_time_factor_after_1s']:.2f} after the first "
-            f"second\n  CPU s per s: the Simulator's thread "
+            f"second, at most {alone['max_lag_behind_real_time_s']:.2f} s behind real time"
+            f"\n  CPU s per s: the Simulator's thread "
             f"{alone['main_thread_cpu_s_per_s']:.2f}, the other threads (the image "
             f"update's worker) {alone['other_threads_cpu_s_per_s']:.2f}; "
             f"{alone['images_applied_per_s']:.1f} images applied per s, {update}; "

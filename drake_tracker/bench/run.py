@@ -45,7 +45,10 @@ Keys of ``bench.json``:
 * ``tracker_alone_paced``: the same held to real time, as on a robot (``defaults``, and
   ``every_frame`` with ``image.min_image_interval_s`` 0: every frame of the camera, at
   ``demo_camera_rate_hz``): its late updates took longer than ``image.update_latency_s``
-  of wall time;
+  of wall time. Its real-time factor after the first second reads above 1 when the
+  Simulator fell behind in that second and caught up; ``max_lag_behind_real_time_s``
+  (also in ``tracker_alone``) is the most the simulated clock ever was behind the wall
+  clock, which catching up does not hide;
 * ``reading_path``: what each joint reading costs the Simulator's thread in a Diagram,
   on the same recorded sensors (:mod:`drake_tracker.bench.readings`);
 * ``cameras``: an image update's cost, one camera at 30 Hz vs two at 15 Hz (``bench/cameras.py``);
