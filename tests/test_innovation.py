@@ -11,6 +11,7 @@ from drake_tracker.core.robustness.health import (
     HealthState,
     ImageConsistency,
     TrackerHealth,
+    drifts,
     next_health,
 )
 from drake_tracker.core.robustness.innovation import (
@@ -18,6 +19,7 @@ from drake_tracker.core.robustness.innovation import (
     NO_INNOVATION,
     WINDOW_IMAGES,
     chi2_quantile,
+    image_inconsistent,
     image_innovation,
     innovations_consistent,
     with_innovation,
@@ -122,3 +124,43 @@ def test_the_health_reports_an_inconsistent_filter_as_uncertain_without_forgetti
     assert next_health(TrackerHealth(HealthState.TRACKING, agree[0], 0, 3,
                                      confirming_in_a_row=1), agree[1],
                        params).state == HealthState.TRACKING
+
+
+def test_one_images_test_fires_at_the_stated_rate_and_on_a_drift():
+    """One image's innovation alone (what asks the kept search): a consistent filter's
+    NIS, a chi-square of k, fails on about FALSE_ALARM_PROBABILITY of the images
+    (binomial bounds over 200,000 images of 1-7 joints); an exact chi-square quantile
+    from the tables sits on the edge."""
+    rng = np.random.default_rng(11)
+    images = 200_000
+    dof = rng.integers(1, 8, images)
+    nis = np.array([np.sum(rng.standard_normal(k) ** 2) for k in dof])
+    alarms = sum(image_inconsistent((float(x), int(k))) for x, k in zip(nis, dof))
+    expected = FALSE_ALARM_PROBABILITY * images
+    # Wilson-Hilferty is within 1 % of the quantile from 3 dof on, less good below.
+    assert abs(alarms - expected) < 4 * np.sqrt(expected) + 0.25 * expected
+    assert image_inconsistent((12.838 * 1.02, 3)) and not image_inconsistent((12.838 * 0.98, 3))
+    assert not image_inconsistent(NO_INNOVATION)
+    assert not image_inconsistent((1e6, 0))
+
+
+@pytest.mark.parametrize("last, agreement, visible, expected", [
+    ((40.0, 3), 0.80, 900, True),   # an inconsistent image before, this one disagrees
+    ((2.0, 3), 0.80, 900, False),   # the image before was consistent
+    ((40.0, 3), 0.97, 900, False),  # this image confirms its unhidden arm
+    ((40.0, 3), 0.50, 20, False),   # too little unhidden arm to say anything
+    (NO_INNOVATION, 0.50, 900, False),  # a restart has no innovation
+])
+def test_the_kept_search_is_asked_after_an_inconsistent_image(last, agreement, visible,
+                                                               expected):
+    """``drifts``: the latest applied image's own innovation failed, and this image does
+    not confirm ``tracking_agreement`` (0.95) of the arm it shows unhidden."""
+    params = HealthParams()
+    health = TrackerHealth(acquired=True, innovations=((1.0, 3), last))
+    # Half of 2 * visible robot pixels hidden: agreement counts over all of them.
+    image = ImageConsistency(1.0, 2 * visible, agreement / 2, 0.0, occluded=0.5)
+    assert image.visible_robot_pixels == pytest.approx(visible)
+    assert drifts(image, health, params) is expected
+    assert not drifts(image, TrackerHealth(acquired=True), params)  # nothing applied yet
+    off = HealthParams(second_opinion_agreement=0.0)  # the second opinion switched off
+    assert not drifts(image, health, off)

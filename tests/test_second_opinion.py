@@ -140,3 +140,53 @@ def test_an_unsurprising_image_gets_no_second_opinion(scene):
                                   alone.observation.information)
 
 
+
+
+
+LAG_DEG = {"arm_joint_3": 6.0}  # a belief lagging a fast drift
+
+
+def test_after_an_inconsistent_innovation_the_kept_search_catches_a_drift(scene, caplog):
+    """A confident belief (0.5 deg) that lags a bias drifting faster than its model by
+    6 deg on one joint, the encoders 3 deg off on three others, the image before
+    inconsistent. The bias jumps are off: their wide prior alone reaches such a lag
+    in one image, and here H2 is what is tested. The update moves the joint part of the
+    way; the kept search finds the arm, keeps the biases (better than the encoders' arm)
+    and leaves the camera offsets alone. After a consistent image it is not asked: the
+    outcome is the update's, bit for bit, as with the second opinion switched off."""
+    model, truth, reading, frame = scene
+    lagging = truth.copy()
+    for name, deg in LAG_DEG.items():
+        lagging[model.joint_names.index(name)] += np.radians(deg)
+    prior = prior_at(model, reading, lagging)
+    seen = ImageConsistency(4.9, 900, 0.99, 0.0)  # the image before: no surprise
+    drifting = TrackerHealth(latest=seen, acquired=True, innovations=((2.0, 7), (60.0, 7)))
+    steady = TrackerHealth(latest=seen, acquired=True, innovations=((60.0, 7), (2.0, 7)))
+    no_jumps = TrackerParams()
+    no_jumps.kalman.robot_joints.bias_jump_rate_per_s = 0.0
+    params = resolve_tracker_params(no_jumps, model)
+    alone = ImageProcessor(model, CAMERA, params).observe(frame, prior, 0.1, steady)
+    assert not alone.restarted and not is_surprising(alone.consistency,
+                                                     TrackerParams().health, steady)
+    switched_off = TrackerParams()
+    switched_off.kalman.robot_joints.bias_jump_rate_per_s = 0.0
+    switched_off.health.second_opinion_agreement = 0.0
+    off = ImageProcessor(model, CAMERA, resolve_tracker_params(switched_off, model)).observe(
+        frame, prior, 0.1, drifting)
+    np.testing.assert_array_equal(off.observation.information, alone.observation.information)
+    np.testing.assert_array_equal(off.observation.precision, alone.observation.precision)
+    with caplog.at_level(logging.WARNING):
+        outcome = ImageProcessor(model, CAMERA, params).observe(frame, prior, 0.1, drifting)
+    assert outcome.restarted and "a search keeping the biases" in caplog.text
+    post = outcome.observation.apply(prior)
+    virtual = np.setdiff1d(np.arange(model.num_joints), model.robot_joint_indices)
+    np.testing.assert_allclose(post[:, virtual], prior[:, virtual], rtol=0, atol=1e-12)
+    start = hand_error_mm(model, truth, prior[MEAN_A])
+    stuck = hand_error_mm(model, truth, alone.observation.apply(prior)[MEAN_A])
+    after = hand_error_mm(model, truth, post[MEAN_A])
+    encoders = hand_error_mm(model, truth, full_reading(model, reading))
+    print(f"lag {start:.1f} mm, update alone {stuck:.1f}, kept search {after:.1f}, "
+          f"encoders {encoders:.1f}")
+    assert after < 0.2 * stuck and after < 0.2 * encoders
+    shoulder = model.joint_names.index("arm_joint_1")  # its 3 deg bias is kept
+    assert abs(post[MEAN_B, shoulder] - np.radians(3.0)) < np.radians(1.0)

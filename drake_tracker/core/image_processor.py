@@ -38,6 +38,7 @@ from drake_tracker.core.robustness.health import (
     ImageConsistency,
     TrackerHealth,
     agreeing_pixels,
+    drifts,
     image_consistency,
     is_consistent,
     is_misplaced,
@@ -276,10 +277,14 @@ class ImageProcessor:
             return ImageOutcome(None, None, None)
         # (A restart above has cleared ``acquired``.) A second opinion from the encoders'
         # arm on an image that contradicts the held arm.
-        if self.params.use_joint_readings and not restarted and acquired and \
-                is_surprising(predicted, self.params.health, health):
+        # Else H2 alone, after the filter's innovations outgrew its model.
+        asked = self.params.use_joint_readings and not restarted and acquired
+        if asked and is_surprising(predicted, self.params.health, health):
             overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
                                                   rng, frame.sequence)
+        elif asked and drifts(predicted, health, self.params.health):
+            overrule = self.search.kept_search(plain, prior, result, predicted.time_s, rng,
+                                               frame.sequence)
         else:
             overrule = None
         # While the estimate's biases are implausible, a challenger belief searches from

@@ -180,7 +180,8 @@ class CpfImageUpdate:
     def __call__(self, prior: np.ndarray, observation: PreparedObservation,
                  rng: np.random.Generator, jump_probability: np.ndarray | None = None,
                  jump_std: np.ndarray | None = None, num_particles: int | None = None,
-                 coarse_sweeps: bool = True, widened: bool = False) -> CPFResult | None:
+                 coarse_sweeps: bool = True, widened: bool = False,
+                 blocks: list[np.ndarray] | None = None) -> CPFResult | None:
         """Angle marginals after the image, or None for an image with no valid pixel.
 
         ``jump_probability``/``jump_std`` (n,) let the prior of each angle admit a jump
@@ -188,13 +189,15 @@ class CpfImageUpdate:
         ``num_particles``
         overrides the particles per block for this image; ``coarse_sweeps`` False scores
         every sweep at full resolution (the tracker's start-up search); ``widened`` scores
-        them widened by ``search_widening_m`` (the search for an arm never held yet)."""
+        them widened by ``search_widening_m`` (the search for an arm never held yet);
+        ``blocks`` searches those of the blocks only (the others keep their prior)."""
         if observation.num_valid == 0:
             return None
         t0 = time.perf_counter()
         eval_before = self.times.render_s + self.times.likelihood_s
         result = annealed_coordinate_particle_filter(
-            prior[MEAN_A], np.sqrt(np.maximum(prior[VAR_A], 0.0)), self.blocks,
+            prior[MEAN_A], np.sqrt(np.maximum(prior[VAR_A], 0.0)),
+            self.blocks if blocks is None else blocks,
             num_particles or self.num_particles, self._likelihood(observation, self.renderer),
             rng, self.max_kl, self.annealing_betas, jump_probability=jump_probability,
             jump_std=jump_std,

@@ -99,3 +99,13 @@ def innovations_consistent(window: tuple[Innovation, ...]) -> bool:
     if dof == 0:
         return False
     return sum(nis for nis, _ in window) <= chi2_quantile(dof, 1.0 - FALSE_ALARM_PROBABILITY)
+
+
+def image_inconsistent(innovation: Innovation) -> bool:
+    """Test (2) on one image's innovation alone: whether its NIS lies beyond the
+    ``1 - FALSE_ALARM_PROBABILITY`` quantile of chi²(k) (False without a degree of
+    freedom). One image, not the window: the window stays failed for
+    :data:`WINDOW_IMAGES` images after a single large innovation, and what it triggers
+    would be paid on each (``health.drifts``)."""
+    nis, dof = innovation
+    return dof > 0 and nis > chi2_quantile(dof, 1.0 - FALSE_ALARM_PROBABILITY)

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -159,19 +159,22 @@ class EncoderSearch:
         return [self.restart, kept]
 
     def _search(self, plain: PreparedObservation, starts: list[tuple[np.ndarray, Restart]],
-                time_s: float, rng: np.random.Generator
+                time_s: float, rng: np.random.Generator, stepped: np.ndarray | None = None
                 ) -> tuple[CPFResult, np.ndarray, Restart] | None:
         """The start-up search from each (prior, restart) of ``starts`` on the image
         ``plain``; the answer whose mean scores best, with its prior and restart (None:
-        no search had a usable answer)."""
+        no search had a usable answer). ``stepped`` (n,) bool: a tracking update's search
+        instead (its particles, coarse sweeps) over the blocks holding those joints."""
         found = []
+        im = self.params.image
+        blocks = None if stepped is None else [b for b in self.update.blocks if stepped[b].any()]
         for start, restart in starts:
             rendered = self.update.renderer.render(start[MEAN_A][None])[0]
-            seen = image_consistency(time_s, rendered, observed_image(plain),
-                                     self.params.image.likelihood)
+            seen = image_consistency(time_s, rendered, observed_image(plain), im.likelihood)
             answer = self.update(start, self._occlusion_aware(plain, rendered, seen), rng,
-                                 None, None, self.params.image.acquisition_num_particles,
-                                 coarse_sweeps=False)
+                                 None, None,
+                                 im.acquisition_num_particles if blocks is None else None,
+                                 coarse_sweeps=blocks is not None, blocks=blocks)
             if answer is not None and not answer.flat_likelihood:
                 found.append((answer, start, restart))
         if len(found) < 2:
@@ -203,6 +206,35 @@ class EncoderSearch:
         log.warning("image %d at %.3f s: it contradicts the estimate's arm, and a search "
                     "from the encoders' arm explains it better (log-likelihood %.0f against "
                     "%.0f); the belief restarts from there", sequence, time_s,
+                    scores[1], scores[0])
+        return Overrule(alternative, candidate, restart)
+
+    def kept_search(self, plain: PreparedObservation, prior: np.ndarray, result: CPFResult,
+                    time_s: float, rng: np.random.Generator, sequence: int
+                    ) -> Overrule | None:
+        """H2 alone, on an image after the filter's innovations outgrew its model
+        (``health.drifts``): the robot joints with a bias take the kept restart's step
+        (``Restart.kept``: every mean kept, the bias variance of the start added, the
+        reading held), every other joint (the camera offsets) stays, and the image
+        update searches those joints' blocks with its own particles and coarse sweeps.
+        Its answer replaces the update's if it explains the image better by the margin,
+        as the second opinion's does. The CPF moves a joint by about two prior standard
+        deviations per image, so a bias that walks or ramps faster than its model is
+        followed late; the step reaches it in one image."""
+        stepped = ~self._virtual & (np.asarray(self.restart.bias_var) > 0)
+        if self.restart.untouched is not None:
+            stepped[self.restart.untouched] = False
+        kept = replace(self.restart.kept(), untouched=np.flatnonzero(~stepped))
+        best = self._search(plain, [(kept.apply(prior), kept)], time_s, rng, stepped)
+        if best is None:
+            return None
+        alternative, candidate, restart = best
+        wins, scores = self._beats(result, alternative, plain)
+        if not wins:
+            return None
+        log.warning("image %d at %.3f s: the filter's innovations outgrew its model, and a "
+                    "search keeping the biases explains the image better (log-likelihood "
+                    "%.0f against %.0f); the belief takes its bias step", sequence, time_s,
                     scores[1], scores[0])
         return Overrule(alternative, candidate, restart)
 
