@@ -195,17 +195,25 @@ class EncoderSearch:
         kept = self.restart.kept()
         best = self._search(plain, [(self.restart.apply(prior), self.restart),
                                     (kept.apply(prior), kept)], time_s, rng)
+        return self._adopted(best, result, plain, sequence, time_s, "it contradicts the "
+                             "estimate's arm, and a search from the encoders' arm")
+
+    def _adopted(self, best: tuple[CPFResult, np.ndarray, Restart] | None,
+                 result: CPFResult, plain: PreparedObservation, sequence: int,
+                 time_s: float, why: str) -> Overrule | None:
+        """A search's ``best`` (answer, prior, restart) as the overrule of the update's
+        ``result`` if it beats it by the margin (logged: ``why`` explains it better),
+        else None."""
         if best is None:
             return None
         alternative, candidate, restart = best
         wins, scores = self._beats(result, alternative, plain)
         if not wins:
-            log.debug("image %d: the search from the encoders' arm scored %.0f against the "
-                      "update's %.0f: kept the update", sequence, scores[1], scores[0])
+            log.debug("image %d: a search scored %.0f against the update's %.0f: kept the "
+                      "update", sequence, scores[1], scores[0])
             return None
-        log.warning("image %d at %.3f s: it contradicts the estimate's arm, and a search "
-                    "from the encoders' arm explains it better (log-likelihood %.0f against "
-                    "%.0f); the belief restarts from there", sequence, time_s,
+        log.warning("image %d at %.3f s: %s explains it better (log-likelihood %.0f against "
+                    "%.0f); the belief restarts from there", sequence, time_s, why,
                     scores[1], scores[0])
         return Overrule(alternative, candidate, restart)
 
@@ -226,17 +234,8 @@ class EncoderSearch:
             stepped[self.restart.untouched] = False
         kept = replace(self.restart.kept(), untouched=np.flatnonzero(~stepped))
         best = self._search(plain, [(kept.apply(prior), kept)], time_s, rng, stepped)
-        if best is None:
-            return None
-        alternative, candidate, restart = best
-        wins, scores = self._beats(result, alternative, plain)
-        if not wins:
-            return None
-        log.warning("image %d at %.3f s: the filter's innovations outgrew its model, and a "
-                    "search keeping the biases explains the image better (log-likelihood "
-                    "%.0f against %.0f); the belief takes its bias step", sequence, time_s,
-                    scores[1], scores[0])
-        return Overrule(alternative, candidate, restart)
+        return self._adopted(best, result, plain, sequence, time_s, "the filter's "
+                             "innovations outgrew its model, and a search keeping the biases")
 
     def challenge(self, plain: PreparedObservation, prior: np.ndarray, result: CPFResult,
                   tracker: TrackerHealth, time_s: float, rng: np.random.Generator,
