@@ -140,9 +140,6 @@ def test_an_unsurprising_image_gets_no_second_opinion(scene):
                                   alone.observation.information)
 
 
-
-
-
 LAG_DEG = {"arm_joint_3": 6.0}  # a belief lagging a fast drift
 
 

@@ -283,8 +283,8 @@ class ImageProcessor:
             overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
                                                   rng, frame.sequence)
         elif asked and drifts(predicted, health, self.params.health):
-            overrule = self.search.kept_search(plain, prior, result, predicted.time_s, rng,
-                                               frame.sequence)
+            overrule = self.search.kept_search(plain, observation, prior, result,
+                                               predicted.time_s, rng, frame.sequence)
         else:
             overrule = None
         # While the estimate's biases are implausible, a challenger belief searches from

@@ -96,16 +96,15 @@ def innovations_consistent(window: tuple[Innovation, ...]) -> bool:
     ``1 - FALSE_ALARM_PROBABILITY`` quantile; False when none has any degree of freedom
     (nothing vouches for the filter)."""
     dof = sum(k for _, k in window)
-    if dof == 0:
-        return False
-    return sum(nis for nis, _ in window) <= chi2_quantile(dof, 1.0 - FALSE_ALARM_PROBABILITY)
+    return dof > 0 and not image_inconsistent((sum(nis for nis, _ in window), dof))
 
 
 def image_inconsistent(innovation: Innovation) -> bool:
-    """Test (2) on one image's innovation alone: whether its NIS lies beyond the
-    ``1 - FALSE_ALARM_PROBABILITY`` quantile of chi²(k) (False without a degree of
-    freedom). One image, not the window: the window stays failed for
+    """Test (2) on one image's innovation alone (or a window's, pooled): whether its
+    NIS lies beyond the ``1 - FALSE_ALARM_PROBABILITY`` quantile of chi²(k) (False
+    without a degree of freedom). One image, not the window: the window stays failed for
     :data:`WINDOW_IMAGES` images after a single large innovation, and what it triggers
     would be paid on each (``health.drifts``)."""
     nis, dof = innovation
-    return dof > 0 and nis > chi2_quantile(dof, 1.0 - FALSE_ALARM_PROBABILITY)
+    # Not ``<=``: a NaN is no consistent innovation.
+    return dof > 0 and not nis <= chi2_quantile(dof, 1.0 - FALSE_ALARM_PROBABILITY)

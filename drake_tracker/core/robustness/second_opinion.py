@@ -132,6 +132,13 @@ class EncoderSearch:
                                     joints.declared_jump_rate_per_s)
         self.plausible_std = np.where(joints.robot & joints.has_bias, spread, np.inf)
         self._growth = sigma_b ** 2  # the bias random walk's variance per second
+        # The kept search's step: the robot joints with a bias that this camera's images
+        # may move, and the CPF blocks that hold them.
+        stepped = joints.robot & (np.asarray(restart.bias_var) > 0)
+        if restart.untouched is not None:
+            stepped[restart.untouched] = False
+        self._drift_step = replace(restart.kept(), untouched=np.flatnonzero(~stepped))
+        self._drift_blocks = [b for b in update.blocks if stepped[b].any()]
 
     def _beats(self, result: CPFResult, alternative: CPFResult,
                plain: PreparedObservation) -> tuple[bool, np.ndarray]:
@@ -159,22 +166,19 @@ class EncoderSearch:
         return [self.restart, kept]
 
     def _search(self, plain: PreparedObservation, starts: list[tuple[np.ndarray, Restart]],
-                time_s: float, rng: np.random.Generator, stepped: np.ndarray | None = None
+                time_s: float, rng: np.random.Generator
                 ) -> tuple[CPFResult, np.ndarray, Restart] | None:
         """The start-up search from each (prior, restart) of ``starts`` on the image
         ``plain``; the answer whose mean scores best, with its prior and restart (None:
-        no search had a usable answer). ``stepped`` (n,) bool: a tracking update's search
-        instead (its particles, coarse sweeps) over the blocks holding those joints."""
+        no search had a usable answer)."""
         found = []
-        im = self.params.image
-        blocks = None if stepped is None else [b for b in self.update.blocks if stepped[b].any()]
         for start, restart in starts:
             rendered = self.update.renderer.render(start[MEAN_A][None])[0]
-            seen = image_consistency(time_s, rendered, observed_image(plain), im.likelihood)
+            seen = image_consistency(time_s, rendered, observed_image(plain),
+                                     self.params.image.likelihood)
             answer = self.update(start, self._occlusion_aware(plain, rendered, seen), rng,
-                                 None, None,
-                                 im.acquisition_num_particles if blocks is None else None,
-                                 coarse_sweeps=blocks is not None, blocks=blocks)
+                                 None, None, self.params.image.acquisition_num_particles,
+                                 coarse_sweeps=False)
             if answer is not None and not answer.flat_likelihood:
                 found.append((answer, start, restart))
         if len(found) < 2:
@@ -217,9 +221,9 @@ class EncoderSearch:
                     scores[1], scores[0])
         return Overrule(alternative, candidate, restart)
 
-    def kept_search(self, plain: PreparedObservation, prior: np.ndarray, result: CPFResult,
-                    time_s: float, rng: np.random.Generator, sequence: int
-                    ) -> Overrule | None:
+    def kept_search(self, plain: PreparedObservation, observation: PreparedObservation,
+                    prior: np.ndarray, result: CPFResult, time_s: float,
+                    rng: np.random.Generator, sequence: int) -> Overrule | None:
         """H2 alone, on an image after the filter's innovations outgrew its model
         (``health.drifts``): the robot joints with a bias take the kept restart's step
         (``Restart.kept``: every mean kept, the bias variance of the start added, the
@@ -228,14 +232,16 @@ class EncoderSearch:
         Its answer replaces the update's if it explains the image better by the margin,
         as the second opinion's does. The CPF moves a joint by about two prior standard
         deviations per image, so a bias that walks or ramps faster than its model is
-        followed late; the step reaches it in one image."""
-        stepped = ~self._virtual & (np.asarray(self.restart.bias_var) > 0)
-        if self.restart.untouched is not None:
-            stepped[self.restart.untouched] = False
-        kept = replace(self.restart.kept(), untouched=np.flatnonzero(~stepped))
-        best = self._search(plain, [(kept.apply(prior), kept)], time_s, rng, stepped)
-        return self._adopted(best, result, plain, sequence, time_s, "the filter's "
-                             "innovations outgrew its model, and a search keeping the biases")
+        followed late; the step reaches it in one image. The step keeps the means, so
+        the search scores ``observation``, the update's own (its occlusion read at the
+        prior mean), and ``plain`` decides."""
+        start = self._drift_step.apply(prior)
+        answer = self.update(start, observation, rng, blocks=self._drift_blocks)
+        if answer is None or answer.flat_likelihood:
+            return None
+        return self._adopted((answer, start, self._drift_step), result, plain, sequence,
+                             time_s, "the filter's innovations outgrew its model, and a "
+                             "search keeping the biases")
 
     def challenge(self, plain: PreparedObservation, prior: np.ndarray, result: CPFResult,
                   tracker: TrackerHealth, time_s: float, rng: np.random.Generator,
