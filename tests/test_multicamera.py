@@ -275,46 +275,6 @@ def test_the_reported_health_is_the_first_cameras_while_it_tracks():
         assert best_health(channels(state)).state == state
 
 
-def test_a_camera_whose_pose_hides_the_arm_it_sees_restarts_its_own_pose_only():
-    """One of several cameras whose estimated pose is 10-20 cm behind its true one sees
-    the arm nearer than the estimate puts it: all but a few of its pixels read as hidden,
-    which alone would skip the image. Seen through the camera's nominal mount the held
-    arm agrees, so the camera's own six offset joints restart (the arm and the other
-    camera's joints are kept) and the image is applied; a plate in front of the arm,
-    which hides the arm from the nominal mount too, is still skipped."""
-    from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, initial_moments
-    from drake_tracker.core.image_processor import ImageProcessor
-
-    model = build_tracker_model(two_camera_config())
-    params = small_params()
-    params.health.min_robot_pixels = 100
-    params.use_joint_readings = False  # no restart from the encoders' arm: this one alone
-    resolved = resolve_tracker_params(params, model)
-    post = ImageProcessor(model, CAMERA, resolved, camera_name="post")
-    truth = np.zeros(model.num_joints)
-    for name, angle in {"arm_joint_1": 0.35, "arm_joint_2": 1.05, "arm_joint_4": -1.05,
-                        "arm_joint_6": -0.5, "head_tilt": 0.56}.items():
-        truth[model.joint_names.index(name)] = angle
-    arm = post.update.renderer.render(truth[None])[0]
-    image = np.where(np.isfinite(arm), arm, 3.0).astype(np.float32)
-    plate = np.where(np.isfinite(arm), 0.5, 3.0).astype(np.float32)
-    z = model.joint_names.index("post_offset_z")
-    own = set(model.camera_joint_indices("post").tolist())
-    for behind_m in (0.1, 0.2):
-        prior = initial_moments(truth, resolved.joints.initial_angle_std,
-                                resolved.joints.initial_bias_std, resolved.joints.has_bias)
-        prior[MEAN_A, z], prior[MEAN_B, z] = -behind_m, behind_m
-        out = post.observe(DepthFrame(0.0, 0.01, image, 0), prior)
-        assert out.restarted and out.observation is not None
-        assert out.consistency.agreement > 0.9
-        assert abs(out.result.mean[z]) < 0.01  # back at the nominal mount, within 1 cm
-        kept = set(out.observation.restart.untouched.tolist())
-        assert kept == set(range(model.num_joints)) - own
-        hidden = post.observe(DepthFrame(0.0, 0.01, plate, 1), prior)
-        assert hidden.observation is None and not hidden.restarted
-        assert "other cameras hold the arm" in hidden.skip_reason
-
-
 def test_the_estimate_gives_the_hand_in_every_cameras_frame_as_drake_computes_it(
         two_cameras):
     """``TrackerEstimate.X_WC_by_camera`` and ``X_CkE`` at the estimate's positions equal

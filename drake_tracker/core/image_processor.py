@@ -38,6 +38,7 @@ from drake_tracker.core.robustness.health import (
     ImageConsistency,
     TrackerHealth,
     agreeing_pixels,
+    contradicts,
     drifts,
     image_consistency,
     is_consistent,
@@ -161,7 +162,7 @@ class ImageProcessor:
             tuple(im.annealing_betas), tuple(im.sweep_image_widths_px),
             im.search_depth_widening_m)
         self.search = EncoderSearch(self.update, params, self._occlusion_aware,
-                                    self.restart)
+                                    self.restart, self.remount)
         #: Where :meth:`observe`'s time went (``bench/decision.py`` reads it).
         self.times = DecisionTimes()
 
@@ -287,6 +288,11 @@ class ImageProcessor:
                                                predicted.time_s, rng, frame.sequence)
         else:
             overrule = None
+        if overrule is None and self.several_cameras and self.params.use_joint_readings \
+                and not restarted and contradicts(
+                predicted, self.params.health):
+            overrule = self.search.remount_search(plain, prior, result, predicted.time_s,
+                                                  rng, frame.sequence)
         # While the estimate's biases are implausible, a challenger belief searches from
         # the encoders' arm over several images (see core/robustness/second_opinion.py).
         challenger = None
