@@ -3,6 +3,7 @@ pose restarts (``ImageProcessor._remounted``) or is searched again
 (``EncoderSearch.remount_search``), the arm and the other cameras kept."""
 
 import logging
+from dataclasses import replace
 
 import numpy as np
 from test_multicamera import CAMERA, two_camera_config
@@ -60,7 +61,8 @@ def test_a_camera_whose_pose_drifted_is_searched_again_with_the_held_arm_kept(ca
     neither the update nor a restart of the arm can explain it. The search of the
     camera's own pose (its pan, tilt and six offset joints, restarted at their readings
     and the nominal mount) does: it is adopted, the pan comes back within 1 deg, and every
-    other joint keeps its prior to the last bit. With the pan right, no such search."""
+    other joint keeps its prior to the last bit. With the pan right, no such search; nor
+    before the camera has once held the arm (its pose is then the start-up search's)."""
     from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, initial_moments
     from drake_tracker.core.image_processor import ImageProcessor
     from drake_tracker.core.robustness.health import (
@@ -82,10 +84,14 @@ def test_a_camera_whose_pose_drifted_is_searched_again_with_the_held_arm_kept(ca
     pan = names.index("head_pan")
     own = set(model.camera_joint_indices("camera").tolist()) | {pan,
                                                                  names.index("head_tilt")}
-    # The other camera's latest image confirmed the arm: no second opinion is due.
-    held = TrackerHealth(HealthState.TRACKING, acquired=True,
-                         latest=ImageConsistency(0.0, 900.0, 1.0, 0.0, 0.0))
-    for offset_deg in (12.0, 0.0):
+    # The camera has not held the arm for a while (no second opinion), and its previous
+    # image contradicted it too.
+    held = TrackerHealth(HealthState.UNCERTAIN, acquired=False, surprising_in_a_row=1,
+                         confirmed_s=-3.0,
+                         latest=ImageConsistency(0.0, 900.0, 0.1, 0.3, 0.3))
+    never = replace(held, confirmed_s=-np.inf)
+    for offset_deg, health, expected in ((12.0, held, True), (0.0, held, False),
+                                         (12.0, never, False)):
         prior = initial_moments(truth, resolved.joints.initial_angle_std,
                                 resolved.joints.initial_bias_std, resolved.joints.has_bias)
         prior[VAR_A] = np.minimum(prior[VAR_A], np.radians(0.5) ** 2)  # a held belief
@@ -95,12 +101,11 @@ def test_a_camera_whose_pose_drifted_is_searched_again_with_the_held_arm_kept(ca
         prior[MEAN_B, pan] -= np.radians(offset_deg)
         with caplog.at_level(logging.WARNING):
             caplog.clear()
-            out = head.observe(DepthFrame(0.0, 0.01, image, 0), prior, health=held)
+            out = head.observe(DepthFrame(0.0, 0.01, image, 0), prior, health=health)
         searched = "a search of this camera's own pose" in caplog.text
-        if offset_deg == 0.0:
-            assert not searched and not out.restarted
+        assert searched == expected and out.restarted == expected
+        if not expected:
             continue
-        assert searched and out.restarted
         assert abs(np.degrees(out.result.mean[pan] - truth[pan])) < 1.0
         others = sorted(set(range(model.num_joints)) - own)
         assert sorted(out.observation.restart.untouched.tolist()) == others

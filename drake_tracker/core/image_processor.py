@@ -38,7 +38,6 @@ from drake_tracker.core.robustness.health import (
     ImageConsistency,
     TrackerHealth,
     agreeing_pixels,
-    contradicts,
     drifts,
     image_consistency,
     is_consistent,
@@ -280,7 +279,8 @@ class ImageProcessor:
         # arm on an image that contradicts the held arm.
         # Else H2 alone, after the filter's innovations outgrew its model.
         asked = self.params.use_joint_readings and not restarted and acquired
-        if asked and is_surprising(predicted, self.params.health, health):
+        surprising = is_surprising(predicted, self.params.health, health)
+        if asked and surprising:
             overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
                                                   rng, frame.sequence)
         elif asked and drifts(predicted, health, self.params.health):
@@ -288,9 +288,12 @@ class ImageProcessor:
                                                predicted.time_s, rng, frame.sequence)
         else:
             overrule = None
-        if overrule is None and self.several_cameras and self.params.use_joint_readings \
-                and not restarted and contradicts(
-                predicted, self.params.health):
+        # With several cameras, H4: this camera's own pose searched again, the arm the
+        # others hold kept, once this camera has held the arm (at the start its pose is
+        # the start-up search's).
+        if overrule is None and surprising and self.several_cameras and \
+                self.params.use_joint_readings and not restarted and \
+                np.isfinite(health.confirmed_s):
             overrule = self.search.remount_search(plain, prior, result, predicted.time_s,
                                                   rng, frame.sequence)
         # While the estimate's biases are implausible, a challenger belief searches from
