@@ -1,5 +1,5 @@
 """One of several cameras whose own pose went wrong while the others hold the arm: its
-pose restarts (``ImageProcessor._remounted``) or is searched again
+pose restarts (``EncoderSearch.remounted``) or is searched again
 (``EncoderSearch.remount_search``), the arm and the other cameras kept."""
 
 import logging

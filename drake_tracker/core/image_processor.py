@@ -127,7 +127,7 @@ class ImageProcessor:
         self.camera_index = 0
         #: Whether the model has other cameras, which may hold the arm while this one
         #: does not see it (``observe``: such an image is not applied, unless it shows
-        #: the arm from this camera's nominal mount: ``_remounted``).
+        #: the arm from this camera's nominal mount: ``EncoderSearch.remounted``).
         self.several_cameras = len(model.cameras) > 1
         #: The robot joints (n,): those whose innovations test the filter's consistency.
         self._robot = np.zeros(model.num_joints, bool)
@@ -232,7 +232,7 @@ class ImageProcessor:
                     f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
         if self.several_cameras and not restarted and \
                 predicted.visible_robot_pixels < self.params.health.min_robot_pixels:
-            remounted = self._remounted(prior, observed, predicted)
+            remounted = self.search.remounted(prior, observed, predicted)
             if remounted is None:
                 return ImageOutcome(None, None, predicted, challenger=health.challenger,
                                     skip_reason=self._out_of_view_reason(predicted))
@@ -320,35 +320,6 @@ class ImageProcessor:
                             challenger=challenger,
                             innovation=image_innovation(prior, observation, self._robot))
 
-    def _remounted(self, prior: np.ndarray, observed: np.ndarray,
-                   predicted: ImageConsistency
-                   ) -> tuple[np.ndarray, np.ndarray, ImageConsistency] | None:
-        """The prior with this camera's own pose restarted (``remount``: its offset
-        joints to the nominal mount, the joints that move only it to their readings; the
-        arm and the other cameras' joints kept), its rendering and its consistency, when
-        the image hides the estimate's arm (at least ``health.min_robot_pixels`` in view,
-        too few of them unhidden) and agrees, consistently and on more pixels, with the
-        held arm seen from there; else None (the image is skipped).
-
-        An image that hides the arm where the estimate puts it is not only an occluder's:
-        a camera whose estimated pose is centimetres behind its true one sees the arm
-        nearer than the estimate puts it, all of it "hidden". Measured on the quick
-        suite's in-out-in-2cam/constant seed 3 (the code of b598ba4), the head camera's
-        first image (the arm 8.6 deg off on every joint) moved its pose 89 mm; from then
-        its images saw 575-970 robot pixels, 95-99 % of them hidden, and all were skipped,
-        also when the arm came back into its view: 85-121 mm in its frame to the end. A
-        plate in front of the arm hides it from the nominal mount too, and stays skipped.
-        """
-        if predicted.robot_pixels < self.params.health.min_robot_pixels:
-            return None
-        candidate = self.remount.apply(prior)
-        rendered = self.update.renderer.render(candidate[MEAN_A][None])[0]
-        seen = image_consistency(predicted.time_s, rendered, observed,
-                                 self.params.image.likelihood)
-        if self.consistent(seen) and agreeing_pixels(seen) > agreeing_pixels(predicted):
-            return candidate, rendered, seen
-        return None
-
     def _out_of_view_reason(self, predicted: ImageConsistency) -> str:
         """Why an image of one of several cameras that shows fewer than
         ``health.min_robot_pixels`` of the arm unhidden where the estimate puts it is not
@@ -398,7 +369,10 @@ class ImageProcessor:
         image = self.params.image
         if predicted.see_through > self.params.health.max_see_through:
             return observation
-        fraction = image_occlusion(predicted, image.likelihood, image.occlusion_prior_pixels)
+        # The image's occlusion probability under a Beta prior worth the fewest pixels
+        # that say something about the arm (docs/method.md §2).
+        fraction = image_occlusion(predicted, image.likelihood,
+                                   self.params.health.min_robot_pixels)
         return with_pixel_occlusion(observation,
                                     pixel_occlusion(observation, rendered, fraction))
 

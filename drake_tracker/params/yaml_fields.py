@@ -25,7 +25,10 @@ RETIRED_FIELDS = {
                                         "duration for holding the arm and for restarting "
                                         "a misplaced estimate)",
     "image.estimate_occlusion": "removed: the occlusion probability is always estimated "
-                                "(image.occlusion_prior_pixels)",
+                                "(its prior weighs health.min_robot_pixels pixels)",
+    "image.occlusion_prior_pixels": "replaced by health.min_robot_pixels (the occlusion "
+                                    "estimate's prior weighs as many pixels as the fewest "
+                                    "that say something about the arm)",
     "image.bias_jumps_in_camera_chain": "removed: the joints that move a camera never "
                                         "have bias jumps",
     "health.no_arm_see_through": "removed: an image shows no arm when it sees behind "
