@@ -24,6 +24,7 @@ from drake_tracker.core.robustness.health import (
     next_health,
 )
 from drake_tracker.core.robustness.second_opinion import (
+    IMPLAUSIBLE_BIAS_SIGMAS,
     challenger_prior,
     implausible_biases,
     plausible_bias_std,
@@ -31,7 +32,7 @@ from drake_tracker.core.robustness.second_opinion import (
 from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 
-#: A bend far beyond the bias model (23 deg is the default's trigger).
+#: A bend far beyond the bias model (29 deg is the default's trigger).
 BEND_DEG = {"arm_joint_4": 40.0}
 
 
@@ -71,8 +72,18 @@ def test_the_challengers_prior_is_the_restart_shifted_by_its_offset():
     np.testing.assert_array_equal(candidate[MEAN_A], [1.0, 2.0])  # not modified
 
 
-@pytest.mark.parametrize("field, value", [("challenger_bias_sigmas", -1.0),
-                                          ("challenger_images", 0)])
+def test_an_implausible_bias_fails_the_innovation_tests_false_alarm_probability():
+    """The threshold is the two-sided normal quantile of the innovation test's
+    false-alarm probability: a bias at it has that tail probability (erfc)."""
+    import math
+
+    from drake_tracker.core.robustness.innovation import FALSE_ALARM_PROBABILITY
+
+    tail = math.erfc(IMPLAUSIBLE_BIAS_SIGMAS / math.sqrt(2.0))
+    assert tail == pytest.approx(FALSE_ALARM_PROBABILITY, rel=1e-9)
+
+
+@pytest.mark.parametrize("field, value", [("challenger_images", -1)])
 def test_bad_challenger_parameters_are_named(field, value):
     with pytest.raises(ValueError, match=f"health.{field}"):
         HealthParams(**{field: value}).validate()
@@ -107,7 +118,8 @@ def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(sce
     params = TrackerParams()
     params.health.second_opinion_agreement = 0.0
     processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
-    assert implausible_biases(prior, processor.search.plausible_std, 2.25).any()
+    assert implausible_biases(prior, processor.search.plausible_std,
+                              IMPLAUSIBLE_BIAS_SIGMAS).any()
     encoders = hand_error_mm(model, truth, full_reading(model, reading))
     start = hand_error_mm(model, truth, prior[MEAN_A])
     with caplog.at_level(logging.WARNING):
@@ -116,7 +128,7 @@ def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(sce
         in caplog.text
     assert outcomes[-1].challenger is None  # it won: none is left
     after = hand_error_mm(model, truth, outcomes[-1].observation.apply(prior)[MEAN_A])
-    params.health.challenger_bias_sigmas = 0.0
+    params.health.challenger_images = 0
     alone = run_images(ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)), frame,
     prior, len(outcomes),
                        0.0)

@@ -47,6 +47,8 @@ def test_an_empty_parameter_file_gives_the_defaults(tmp_path):
      "image.estimate_occlusion: removed"),
     (load_tracker_params, "health:\n  no_arm_see_through: 0.9\n",
      "health.no_arm_see_through: removed"),
+    (load_tracker_params, "health:\n  challenger_bias_sigmas: 2.25\n",
+     "health.challenger_bias_sigmas: removed"),
     (load_tracker_params, "image:\n  occlusion_prior_pixels: 20\n",
      "image.occlusion_prior_pixels: replaced by health.min_robot_pixels"),
     (load_scenario, "duration_s: long\n", "duration_s: 'long' (expected a number)"),

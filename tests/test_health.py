@@ -194,7 +194,7 @@ def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(apollo,
     params = TrackerParams()
     params.kalman.robot_joints.bias_jump_rate_per_s = 0.0
     params.health.second_opinion_agreement = 0.0
-    params.health.challenger_bias_sigmas = 0.0
+    params.health.challenger_images = 0
     errors, lost_at = _track_step(apollo, step_run, params, step_s=1.5)
     assert lost_at is not None and lost_at <= 2.5, lost_at
 

@@ -231,7 +231,7 @@ def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough
         np.radians(-6.0)
     prior = out_of_view_prior(model, truth, bias)
     params = TrackerParams()
-    params.health.challenger_bias_sigmas = 0.0
+    params.health.challenger_images = 0
     processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     encoders = processor.restart.apply(prior)[MEAN_A]
     before = hand_error_mm(model, truth, encoders)
