@@ -49,8 +49,6 @@ def test_an_empty_parameter_file_gives_the_defaults(tmp_path):
      "health.no_arm_see_through: removed"),
     (load_tracker_params, "health:\n  challenger_bias_sigmas: 2.25\n",
      "health.challenger_bias_sigmas: removed"),
-    (load_tracker_params, "image:\n  occlusion_prior_pixels: 20\n",
-     "image.occlusion_prior_pixels: replaced by health.min_robot_pixels"),
     (load_scenario, "duration_s: long\n", "duration_s: 'long' (expected a number)"),
     (load_scenario, "preset: 3\n", "preset: 3 (expected a preset name"),
     (load_scenario, "camera:\n  rate_hz: [30]\n", "camera.rate_hz: [30] (expected a number)"),

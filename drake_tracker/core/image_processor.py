@@ -369,10 +369,7 @@ class ImageProcessor:
         image = self.params.image
         if predicted.see_through > self.params.health.max_see_through:
             return observation
-        # The image's occlusion probability under a Beta prior worth the fewest pixels
-        # that say something about the arm (docs/method.md §2).
-        fraction = image_occlusion(predicted, image.likelihood,
-                                   self.params.health.min_robot_pixels)
+        fraction = image_occlusion(predicted, image.likelihood, image.occlusion_prior_pixels)
         return with_pixel_occlusion(observation,
                                     pixel_occlusion(observation, rendered, fraction))
 

@@ -25,10 +25,7 @@ RETIRED_FIELDS = {
                                         "duration for holding the arm and for restarting "
                                         "a misplaced estimate)",
     "image.estimate_occlusion": "removed: the occlusion probability is always estimated "
-                                "(its prior weighs health.min_robot_pixels pixels)",
-    "image.occlusion_prior_pixels": "replaced by health.min_robot_pixels (the occlusion "
-                                    "estimate's prior weighs as many pixels as the fewest "
-                                    "that say something about the arm)",
+                                "(image.occlusion_prior_pixels)",
     "image.bias_jumps_in_camera_chain": "removed: the joints that move a camera never "
                                         "have bias jumps",
     "health.challenger_bias_sigmas": "removed: a bias is implausible where the bias "

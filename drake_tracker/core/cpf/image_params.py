@@ -70,6 +70,15 @@ class ImageParams:
     #: The near and far clipping planes of the particles' renderings (m).
     near_m: float = 0.1
     far_m: float = 6.0
+    #: Each image's occlusion probability o is estimated (the likelihood's prior
+    #: ``likelihood.occlusion_probability`` is then the prior of that estimate): the
+    #: fraction of the robot's pixels, rendered at the prior mean, that the image shows
+    #: hidden behind something nearer, with a Beta prior worth this many pixels. With o
+    #: fixed at 0.1, an image hiding 78 % of the arm made every hidden pixel a 1-in-10
+    #: event, and configurations that put the arm out of sight (0 per pixel) scored
+    #: better than the truth: the estimate was dragged away (issue 17). (The switch
+    #: ``estimate_occlusion`` that turned it off is gone.)
+    occlusion_prior_pixels: float = 20.0
     #: A joint's bias jump is looked for only on an image with at least this many valid
     #: pixels that a jump of it (either way, by its std) would change, at the prior mean
     #: (``core/robustness/jump_visibility.py``; 0: always).
@@ -94,6 +103,8 @@ def validate_image_params(im: ImageParams) -> None:
         check_field(len(im.block_joints) > 0, "image.block_joints", im.block_joints,
                     "must list at least one block when image.blocks is 'explicit'")
     check_field(im.max_kl > 0, "image.max_kl", im.max_kl, "must be > 0")
+    check_field(math.isfinite(im.occlusion_prior_pixels) and im.occlusion_prior_pixels > 0,
+                "image.occlusion_prior_pixels", im.occlusion_prior_pixels, "must be > 0")
     betas = list(im.annealing_betas)
     check_field(bool(betas) and betas[-1] == 1.0 and all(0 < b <= 1 for b in betas)
                 and betas == sorted(betas), "image.annealing_betas", betas,
