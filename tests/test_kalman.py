@@ -248,14 +248,12 @@ def test_check_reading_answers_as_its_plain_numpy_reference():
 def test_compiled_step_answers_as_its_plain_numpy_reference():
     """The compiled step (``step_unchecked``, and ``step_in_place`` on the Kalman bank
     system's own copy) against plain numpy: predict, cap the joints without a value,
-    update the others; on seeded beliefs and readings with NaN, a zero time step and a
-    bank whose σb² was changed (one coefficient array)."""
+    update the others; on seeded beliefs and readings with NaN and a zero time step."""
     rng = np.random.default_rng(45)
     n = 6
     params = _params(n, rng)
     cap = rng.uniform(0.01, 0.2, n)
-    bank = JointKalmanBank(params, missing_angle_var=cap).with_bias_process_var(
-        rng.uniform(0.0, 1e-4, n))
+    bank = JointKalmanBank(params, missing_angle_var=cap)
     sa2, sb2 = params.angle_process_std ** 2, bank.bias_process_var
     log_c, sq2 = np.log(params.bias_decay_per_s), params.encoder_noise_std ** 2
 

@@ -42,21 +42,11 @@ class Case:
     min_restarts: int = 0
     all_applied: bool = False
     some_skipped: bool = False
-    #: The images' bias noise match moved some joint's rate (offline).
-    rates_move: bool = False
     extra: dict = field(default_factory=dict)
 
 
 def _plain(p):
     p.image.num_particles, p.image.seed = 40, 4
-
-
-def _matched_bias_noise(p):
-    """The bias noise matched to the images, from a configured σb far below what the
-    images show, so that the rates move and the bank system must follow the buffer's."""
-    _plain(p)
-    p.kalman.robot_joints.match_bias_noise_to_images = True
-    p.kalman.robot_joints.bias_process_std_rad_per_sqrt_s = 0.002
 
 
 def _latency(p):
@@ -129,8 +119,6 @@ def _challenger(p):
 CASES = {
     "plain": Case(duration_s=0.6, seed=4, tune=_plain),
     "another robot": Case(robot="arm6", duration_s=0.6, seed=4, tune=_plain),
-    "matched bias noise": Case(duration_s=1.0, seed=4, tune=_matched_bias_noise,
-                               rates_move=True),
     "update on the worker thread": Case(duration_s=0.6, seed=4, tune=_latency,
                                         latency_s=0.01),
     "glitch, clock step, counter restart, out of order": Case(
@@ -187,9 +175,6 @@ def test_offline_tracker_and_diagram_give_the_same_estimates(name, request, capl
         assert all(applied.values())
     if case.some_skipped:
         assert not all(applied.values())
-    if case.rates_move:
-        match = tracker.buffer.bias_noise
-        assert (match.rate_var > match.min_var * 1.01).any()
     caplog.clear()
     with caplog.at_level(logging.WARNING):
         diagram, images_applied = simulate(model, run, p, stamps, sequences)

@@ -85,10 +85,6 @@ def test_an_image_out_of_order_is_applied_at_its_time_exactly(apollo, run, monke
 
     monkeypatch.setattr(BeliefBuffer, "add_image_observation", recording)
     p = small_params()
-    # The matched bias noise learns in the order the images are applied (an image older
-    # than the latest applied one informs no rate): with it the two orders differ by the
-    # rates. The buffer's exactness is that of fixed noise.
-    p.kalman.robot_joints.match_bias_noise_to_images = False
     tracker = Tracker(apollo, run.camera_intrinsics, p)
     _, applied = feed(tracker, run, arrivals=arrivals)
     assert applied[6] and applied[7] and all(applied.values())

@@ -142,23 +142,4 @@ def conclude_image(outcome: ImageOutcome, health: TrackerHealth,
                             "images without a valid pixel")
     after = next_health(health, outcome.consistency, params, outcome.restarted,
                         outcome.misplaced, outcome.challenger, outcome.innovation)
-    observation = outcome.observation
-    if not confirms_tracking(health, after, params):
-        observation = replace(observation, informs_bias_noise=False)
-    return ImageVerdict(observation, after)
-
-
-def confirms_tracking(before: TrackerHealth, after: TrackerHealth,
-                      params: HealthParams) -> bool:
-    """Whether an image confirmed a tracked belief: the arm was tracked before it
-    (``TrackerHealth.tracked``: the health's own ``tracking``, before the report's
-    stricter tests) and it agrees too. Only such an image's innovation sets the bias
-    noise (``AngleObservation.informs_bias_noise``).
-
-    Not the reported state: that says ``uncertain`` while the filter's innovations are
-    larger than its model allows (``innovation.py``), which is what a bias drifting
-    faster than its model does, so the images that should raise the rate never did. On
-    the quick suite's random walks at 3 and 6 deg/s^0.5 the match then changed no
-    estimate at all (1548c53, stream 0: every sample the same as without it)."""
-    return (before.tracked(params) and after.disagreeing_in_a_row == 0
-            and after.agreeing_in_a_row > before.agreeing_in_a_row)
+    return ImageVerdict(outcome.observation, after)

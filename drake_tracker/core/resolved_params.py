@@ -44,8 +44,6 @@ class JointArrays:
     initial_mean: np.ndarray
     initial_angle_std: np.ndarray
     initial_bias_std: np.ndarray
-    #: Whose σb the images' innovations set (``JointNoise.match_bias_noise_to_images``).
-    match_bias_noise: np.ndarray
     #: Which joints are the robot's (measured); the others are the virtual camera joints.
     robot: np.ndarray
     #: Indices of the robot joints (the encoder readings' order) within ``names``.

@@ -76,7 +76,6 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
         initial_mean=mean,
         initial_angle_std=column("initial_angle_std_rad"),
         initial_bias_std=column("initial_bias_std_rad"),
-        match_bias_noise=has_bias & np.array([j.match_bias_noise_to_images for j in noise]),
         robot=np.isin(names, model.robot_joint_names),
         robot_indices=model.robot_joint_indices,
     )

@@ -42,12 +42,6 @@ class JointNoise:
     #: occluded, 22.9 now). With σb = 0.0088 as well (the "occlusion hold") arm++/constant
     #: lost a seed (README, "A bias that outlasts an occlusion").
     bias_decay_per_s: float = 0.98
-    #: Let the images set σb² (rad²/s) between σb² and ``initial_bias_std_rad``² per
-    #: second, from their innovations (``core/filter/bias_noise.py``): a bias that drifts
-    #: faster than σb is followed. Off by default: on the quick suite it brought
-    #: random-walk-3 from 23.3 to 22.2 mm (its floor is 21.4) but moved the heavy and
-    #: lasting occlusions from 15.7 / 22.9 to 19.0 / 29.9 mm (docs/deviations.md).
-    match_bias_noise_to_images: bool = False
     #: Expected bias jumps per second (a cable slipping, a gear skipping): the image
     #: update's prior admits a step of ``bias_jump_std_rad`` with probability
     #: 1 - exp(-rate * time since the previous image), so an image that shows one is

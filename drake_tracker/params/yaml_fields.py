@@ -38,6 +38,13 @@ RETIRED_FIELDS = {
                                  "estimate's and the encoders' rendered arm",
 }
 
+#: Fields of a joint group's noise model (``JointNoise``) of earlier versions.
+RETIRED_JOINT_NOISE_FIELDS = {
+    "match_bias_noise_to_images": "removed: the images' innovations no longer set the "
+                                  "bias random walk's rate (it made occlusions worse); a "
+                                  "drifting bias is followed by the kept search",
+}
+
 
 def retired_field(raw: Any) -> str | None:
     """``"path: why"`` for the first field of ``raw`` (the YAML mapping of a
@@ -48,6 +55,16 @@ def retired_field(raw: Any) -> str | None:
         group, name = path.split(".")
         if isinstance(raw.get(group), dict) and name in raw[group]:
             return f"{path}: {why}"
+    kalman = raw.get("kalman")
+    if isinstance(kalman, dict):  # a joint group's field, or an override's
+        overrides = kalman.get("overrides")
+        groups = {f"kalman.{k}": v for k, v in kalman.items() if k != "overrides"}
+        if isinstance(overrides, dict):
+            groups.update({f"kalman.overrides.{k}": v for k, v in overrides.items()})
+        for where, fields in groups.items():
+            for name, why in RETIRED_JOINT_NOISE_FIELDS.items():
+                if isinstance(fields, dict) and name in fields:
+                    return f"{where}.{name}: {why}"
     return None
 
 

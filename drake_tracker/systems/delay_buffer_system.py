@@ -286,7 +286,7 @@ class DelayBufferSystem(LeafSystem):
         s.buffer.add_image_observation(message.anchor, message.observation)
         now, belief = s.buffer.present()
         s.correction = BeliefCorrection(s.correction.id + 1, now, s.last_reading_time_s,
-                                        belief, s.buffer.bank.bias_process_var)
+                                        belief)
         s.reading = replace(s.reading, correction_id=s.correction.id)  # the bank looks
 
     def _judge_frame(self, camera: str, frame: DepthFrame, s: DelayBufferState) -> bool:

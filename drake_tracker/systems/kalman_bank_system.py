@@ -19,7 +19,7 @@ from pydrake.systems.framework import (
 )
 
 from drake_tracker.core.filter.estimate import PoseReadout
-from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B, JointKalmanBank
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, VAR_A, VAR_B
 from drake_tracker.core.filter.start import full_reading, initial_belief, new_bank
 from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.systems.messages import AdmittedReading, BeliefCorrection
@@ -96,9 +96,7 @@ class JointKalmanBankSystem(LeafSystem):
     estimated frame in the model's world) and ``<name>_X_CE`` (the hand in that frame);
     ``camera_offset``, ``X_CE`` and ``X_WC`` are the first camera's.
 
-    Discrete state: ``belief`` (:meth:`belief`), ``bookkeeping`` (:meth:`bookkeeping`)
-    and ``bias_process_var`` (:meth:`bias_process_var`: the σb² the bank runs with, the
-    buffer's after each image).
+    Discrete state: ``belief`` (:meth:`belief`) and ``bookkeeping`` (:meth:`bookkeeping`).
     """
 
     def __init__(self, *, model: TrackerModel, params: TrackerParams | ResolvedParams,
@@ -113,15 +111,13 @@ class JointKalmanBankSystem(LeafSystem):
         self._virtual = model.virtual_joint_indices
         self._belief = self.DeclareDiscreteState(np.zeros(5 * n))
         self._bookkeeping = self.DeclareDiscreteState(KalmanBankState().to_vector())
-        self._bias_var = self.DeclareDiscreteState(self._bank.bias_process_var)
-        self._bank_key = self._bank.bias_process_var.tobytes()
         self._reading = self.DeclareAbstractInputPort(
             "reading", AbstractValue.Make(AdmittedReading()))
         self._correction = self.DeclareAbstractInputPort(
             "correction", AbstractValue.Make(BeliefCorrection()))
         deps = {self.discrete_state_ticket(self._belief)}
         # plain ints: fastest
-        self._groups = (int(self._belief), int(self._bookkeeping), int(self._bias_var))
+        self._groups = (int(self._belief), int(self._bookkeeping))
         self._outputs = {"belief": self.DeclareVectorOutputPort(
             "belief", 5 * n, lambda c, o: o.SetFromVector(self.belief(c).ravel()), deps)}
         for name, row in _ROWS.items():
@@ -177,21 +173,10 @@ class JointKalmanBankSystem(LeafSystem):
         return KalmanBankState.from_vector(
             context.get_discrete_state().get_value(self._groups[1]))
 
-    def bias_process_var(self, context: Context) -> np.ndarray:
-        """The bias variance rates σb² (n,) (rad²/s) the bank runs with in ``context``."""
-        return context.get_discrete_state().get_value(self._groups[2]).copy()
-
-    def _bank_for(self, var: np.ndarray) -> JointKalmanBank:
-        """The bank with σb² ``var`` (rebuilt only when they changed)."""
-        key = var.tobytes()
-        if key != self._bank_key:
-            self._bank, self._bank_key = self._bank.with_bias_process_var(var), key
-        return self._bank
-
     def _update(self, context: Context, discrete_state) -> EventStatus | None:
         # ``discrete_state`` holds a copy of the state (Drake's, for this update): its
         # groups are changed in place, through views, with no message rebuilt per reading.
-        belief_group, book_group, bias_group = self._groups
+        belief_group, book_group = self._groups
         book = discrete_state.get_mutable_value(book_group)
         time_s, last_reading_s, correction_id, reading_id = book.tolist()  # NaN: None
         reading = self._reading.EvalAbstract(context).get_value()  # Eval's value, cheaper
@@ -209,18 +194,15 @@ class JointKalmanBankSystem(LeafSystem):
             belief[:] = correction.belief
             time_s, last_reading_s = correction.time_s, correction.last_reading_time_s
             correction_id = correction.id
-            if correction.bias_process_var is not None:
-                discrete_state.set_value(bias_group, correction.bias_process_var)
         if new_reading:
             reading_id = reading.id
-            time_s, last_reading_s = self._filter(reading, time_s, last_reading_s, belief,
-                                                  discrete_state.get_value(bias_group))
+            time_s, last_reading_s = self._filter(reading, time_s, last_reading_s, belief)
         # (item by item: a slice set from a tuple costs twice as much)
         book[0], book[1], book[2], book[3] = time_s, last_reading_s, correction_id, reading_id
         return None
 
     def _filter(self, reading: AdmittedReading, time_s: float, last_reading_s: float,
-                belief: np.ndarray, bias_process_var: np.ndarray) -> tuple[float, float]:
+                belief: np.ndarray) -> tuple[float, float]:
         """Filters an admitted reading into ``belief`` in place (eqs. 3-5 of
         ``docs/method.md``); returns the belief's time and its latest reading's (NaN:
         none), as :class:`KalmanBankState` holds them."""
@@ -231,7 +213,7 @@ class JointKalmanBankSystem(LeafSystem):
             return time_s, last_reading_s  # the adopted correction holds it already
         if time_s != time_s:  # NaN: no belief yet
             belief[:], time_s = initial_belief(self._params, reading.values), t
-        self._bank_for(bias_process_var).step_in_place(
+        self._bank.step_in_place(
             belief, t - time_s, full_reading(self._params, reading.values))
         return t, t
 

@@ -23,9 +23,6 @@ class BeliefCorrection:
     #: Stamp of the latest joint reading the belief includes.
     last_reading_time_s: float = float("-inf")
     belief: np.ndarray | None = None
-    #: The bias variance rates σb² (n,) the buffer's bank runs with after the image
-    #: (``core/filter/bias_noise.py``); None: as configured.
-    bias_process_var: np.ndarray | None = None
 
 
 @dataclass

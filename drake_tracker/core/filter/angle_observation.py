@@ -116,10 +116,6 @@ class AngleObservation:
     precision: np.ndarray
     information: np.ndarray
     restart: Restart | None = None
-    #: Whether its innovation may set the bias noise (``core/filter/bias_noise.py``):
-    #: only an image that confirms a tracked belief measures a drift; one that re-finds
-    #: the arm after a jump or a wrong mode does not.
-    informs_bias_noise: bool = True
 
     @staticmethod
     def from_posterior(prior: np.ndarray, mean_post: np.ndarray,
@@ -161,7 +157,7 @@ class AngleObservation:
         exp(-P (a + Δ)²/2 + I (a + Δ)) ∝ exp(-P a²/2 + (I - P Δ) a).
         """
         return AngleObservation(self.precision, self.information - self.precision * angle_shift,
-                                self.restart, self.informs_bias_noise)
+                                self.restart)
 
     def apply(self, prior: np.ndarray) -> np.ndarray:
         """The (5, n) posterior of ``prior`` (restarted first when ``restart`` is set): angle

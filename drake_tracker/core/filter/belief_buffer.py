@@ -31,7 +31,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from drake_tracker.core.filter.angle_observation import AngleObservation
-from drake_tracker.core.filter.bias_noise import BiasNoiseMatch
 from drake_tracker.core.filter.kalman import MEAN_A, JointKalmanBank
 
 log = logging.getLogger(__name__)
@@ -94,8 +93,7 @@ class BeliefBuffer:
     """
 
     def __init__(self, bank: JointKalmanBank, initial_moments: np.ndarray, initial_time_s: float,
-                 horizon_s: float, max_interpolation_gap_s: float = 0.05,
-                 bias_noise: BiasNoiseMatch | None = None):
+                 horizon_s: float, max_interpolation_gap_s: float = 0.05):
         if not horizon_s > 0:
             raise ValueError(f"delay buffer horizon_s must be > 0, got {horizon_s}")
         if not max_interpolation_gap_s >= 0:
@@ -105,11 +103,6 @@ class BeliefBuffer:
         if initial_moments.shape != (5, bank.num_joints):
             raise ValueError(f"initial moments have shape {initial_moments.shape}, "
                              f"expected (5, {bank.num_joints})")
-        #: The bias noise matched to the images (``core/filter/bias_noise.py``), or None:
-        #: the bank's σb stays as configured.
-        self.bias_noise = bias_noise
-        if bias_noise is not None:
-            bank = bank.with_bias_process_var(bias_noise.rate_var)
         self.bank = bank
         self.horizon_s = float(horizon_s)
         self._anchor_time = float(initial_time_s)
@@ -329,9 +322,6 @@ class BeliefBuffer:
             raise ValueError(f"image observation rejected: {problem}")
         k, t0, belief = self._latest_at_or_before(t)
         prior = self.bank.predict(belief, t - t0)
-        if self.bias_noise is not None:  # the bias noise from this image's innovation
-            self.bias_noise = self.bias_noise.after_image(t, prior, observation)
-            self.bank = self.bank.with_bias_process_var(self.bias_noise.rate_var)
         k = self._insert(k, _Event(float(t), observation=observation), observation.apply(prior))
         self._replay_from(k + 1)
 

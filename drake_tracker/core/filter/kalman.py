@@ -184,19 +184,6 @@ class JointKalmanBank:
         """σb² (n,), the bias variance rate (rad²/s) the process model (5) uses."""
         return self._sb2.copy()
 
-    def with_bias_process_var(self, var: np.ndarray) -> JointKalmanBank:
-        """This bank with the bias variance rate σb² set to ``var`` (n,) (rad²/s): a new
-        bank; this one is unchanged (beliefs filtered by it stay what they were)."""
-        var = np.asarray(var, float).reshape(self.num_joints)
-        if not (np.isfinite(var).all() and (var >= 0).all()):
-            raise ValueError(f"bias process variances must be finite and >= 0, got {var}")
-        bank = object.__new__(JointKalmanBank)
-        bank.__dict__.update(self.__dict__)
-        bank._coef = self._coef.copy()
-        bank._coef[_SB2] = var
-        bank._views()
-        return bank
-
     def check_reading(self, reading: np.ndarray) -> np.ndarray:
         """``reading`` as a float (n,) array; a ValueError for a wrong shape, for no value
         at all, or naming the joints whose value is infinite (NaN: no value, allowed)."""

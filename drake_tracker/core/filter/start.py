@@ -8,7 +8,6 @@ from typing import Protocol
 import numpy as np
 
 from drake_tracker.core.filter.belief_buffer import BeliefBuffer
-from drake_tracker.core.filter.bias_noise import BiasNoiseMatch
 from drake_tracker.core.filter.kalman import JointKalmanBank, initial_moments
 from drake_tracker.core.resolved_params import ResolvedParams
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
@@ -36,21 +35,7 @@ def new_belief_buffer(params: ResolvedParams, t: float,
                       first_reading: np.ndarray | None) -> BeliefBuffer:
     """The delay buffer started at ``t`` from the first reading (None: vision only)."""
     return BeliefBuffer(new_bank(params), initial_belief(params, first_reading), t,
-                        params.buffer_horizon_s, params.max_interpolation_gap_s,
-                        bias_noise_match(params))
-
-
-def bias_noise_match(params: ResolvedParams) -> BiasNoiseMatch | None:
-    """The start of the images' bias noise match (``core/filter/bias_noise.py``): the
-    joints with ``match_bias_noise_to_images`` adapt σb² between its configured value and
-    the start's bias variance per second; None when no joint does."""
-    joints = params.joints
-    adapts = np.asarray(joints.match_bias_noise, bool)
-    if not adapts.any():
-        return None
-    min_var = joints.kalman.effective_bias_std() ** 2
-    return BiasNoiseMatch.start(min_var, np.where(adapts, joints.initial_bias_std ** 2, min_var),
-                                adapts)
+                        params.buffer_horizon_s, params.max_interpolation_gap_s)
 
 
 def start_reading_ok(reading: np.ndarray, warnings: RateLimitedWarning) -> bool:

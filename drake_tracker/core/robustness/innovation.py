@@ -15,8 +15,8 @@ the filter is *consistent* while
 
     sum NIS <= chi²_{1-p}(sum k),    p = FALSE_ALARM_PROBABILITY              (2)
 
-A joint counts where the image says at least as much as the prior (``R <= s``), as in
-``core/filter/bias_noise.py``: where it says little, the CPF mean's Monte-Carlo error,
+A joint counts where the image says at least as much as the prior (``R <= s``): where
+it says little, the CPF mean's Monte-Carlo error,
 which ``R`` does not hold, dominates the innovation. An image that restarted the belief
 has no innovation against it (it fills a slot of the window with nothing).
 
