@@ -146,7 +146,7 @@ class EncoderSearch:
         if remount is not None:
             own = np.ones(len(params.joints.names), bool)
             own[remount.untouched] = False
-            self._remount_blocks = [b for b in update.blocks if own[b].any()]
+            self._remount_blocks = self._blocks_holding(own)
         joints = params.joints
         self._virtual = ~joints.robot
         self._occlusion_aware = occlusion_aware
@@ -162,7 +162,11 @@ class EncoderSearch:
         if restart.untouched is not None:
             stepped[restart.untouched] = False
         self._drift_step = replace(restart.kept(), untouched=np.flatnonzero(~stepped))
-        self._drift_blocks = [b for b in update.blocks if stepped[b].any()]
+        self._drift_blocks = self._blocks_holding(stepped)
+
+    def _blocks_holding(self, joints: np.ndarray) -> list[np.ndarray]:
+        """The update's CPF blocks that hold any of ``joints`` (n,) bool."""
+        return [b for b in self.update.blocks if joints[b].any()]
 
     def _beats(self, result: CPFResult, alternative: CPFResult,
                plain: PreparedObservation) -> tuple[bool, np.ndarray]:
@@ -190,11 +194,12 @@ class EncoderSearch:
         return [self.restart, kept]
 
     def _search(self, plain: PreparedObservation, starts: list[tuple[np.ndarray, Restart]],
-                time_s: float, rng: np.random.Generator
+                time_s: float, rng: np.random.Generator,
+                blocks: list[np.ndarray] | None = None
                 ) -> tuple[CPFResult, np.ndarray, Restart] | None:
         """The start-up search from each (prior, restart) of ``starts`` on the image
-        ``plain``; the answer whose mean scores best, with its prior and restart (None:
-        no search had a usable answer)."""
+        ``plain`` (over ``blocks`` only, if given); the answer whose mean scores best,
+        with its prior and restart (None: no search had a usable answer)."""
         found = []
         for start, restart in starts:
             rendered = self.update.renderer.render(start[MEAN_A][None])[0]
@@ -202,7 +207,7 @@ class EncoderSearch:
                                      self.params.image.likelihood)
             answer = self.update(start, self._occlusion_aware(plain, rendered, seen), rng,
                                  None, None, self.params.image.acquisition_num_particles,
-                                 coarse_sweeps=False)
+                                 coarse_sweeps=False, blocks=blocks)
             if answer is not None and not answer.flat_likelihood:
                 found.append((answer, start, restart))
         if len(found) < 2:
@@ -311,18 +316,10 @@ class EncoderSearch:
         of its images, contradicting the arm the post camera held, pushed the head
         further off (pan 1 -> 18 deg, tilt -3 -> -16 deg in 1.2 s): 0.1 -> 0.7 m in the
         head camera's frame; with this search, 5 mm."""
-        start = self.remount.apply(prior)
-        rendered = self.update.renderer.render(start[MEAN_A][None])[0]
-        seen = image_consistency(time_s, rendered, observed_image(plain),
-                                 self.params.image.likelihood)
-        answer = self.update(start, self._occlusion_aware(plain, rendered, seen), rng,
-                             None, None, self.params.image.acquisition_num_particles,
-                             coarse_sweeps=False, blocks=self._remount_blocks)
-        if answer is None or answer.flat_likelihood:
-            return None
-        return self._adopted((answer, start, self.remount), result, plain, sequence,
-                             time_s, "it contradicts the arm the other cameras hold, and "
-                             "a search of this camera's own pose")
+        best = self._search(plain, [(self.remount.apply(prior), self.remount)], time_s, rng,
+                            self._remount_blocks)
+        return self._adopted(best, result, plain, sequence, time_s, "it contradicts the arm "
+                             "the other cameras hold, and a search of this camera's own pose")
 
     def challenge(self, plain: PreparedObservation, prior: np.ndarray, result: CPFResult,
                   tracker: TrackerHealth, time_s: float, rng: np.random.Generator,
