@@ -183,3 +183,25 @@ def test_bad_camera_topics_are_one_line_errors(recorded, capsys, flags, fragment
     code, _, err = run_cli(["track", "--bag", str(folder / "run.mcap"), "--robot",
                             str(folder / "robot.yaml"), *flags], capsys)
     assert_one_line_error(code, err, fragment)
+
+
+def test_a_camera_of_the_robot_without_a_depth_topic_is_named(recorded, capsys, caplog):
+    """A two-camera robot tracked from the post camera's topic alone: it runs (a camera
+    without images is allowed), and the warning names the head camera that gets none."""
+    import logging
+
+    _, folder = recorded
+    with caplog.at_level(logging.WARNING):
+        code, _, err = run_cli(["track", "--bag", str(folder / "run.mcap"), "--robot",
+                                str(folder / "robot.yaml"), "--depth-topic",
+                                "post_camera=/post_camera/depth/image_raw", "--out",
+                                str(folder / "post_only")], capsys)
+    assert code == 0, err
+    assert "camera(s) ['camera'] have no --depth-topic" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        code, _, err = run_cli(["track", "--bag", str(folder / "run.mcap"), "--robot",
+                                str(folder / "robot.yaml"), *DEPTH, "--out",
+                                str(folder / "both")], capsys)
+    assert code == 0, err
+    assert "have no --depth-topic" not in caplog.text

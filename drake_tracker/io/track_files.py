@@ -177,6 +177,12 @@ def track_bag(source: BagSource, model: TrackerModel, params: TrackerParams | No
     and each camera's frame id in the bag is its parent on ``estimates.mcap``'s
     ``/tf``."""
     truth = source.truth_X_CE()
+    fed = {c.name or model.camera_names[0] for c in source.cameras}
+    unfed = [name for name in model.camera_names if name not in fed]
+    if unfed:
+        log.warning("the robot's camera(s) %s have no --depth-topic NAME=TOPIC: they get no "
+                    "image, and the hand in their frame rests on the other cameras and the "
+                    "encoders", unfed)
     try:
         return track_to_folder(
             source.events(), model, source.camera_models(), params, out_dir, source.base_ns,
