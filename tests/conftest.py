@@ -10,3 +10,12 @@ def apollo():
     """The default robot (Apollo's arm and head, with the six virtual camera joints):
     built once for the whole session; tests must not modify it."""
     return build_tracker_model(robot_preset("apollo"))
+
+
+@pytest.fixture
+def no_challenger(monkeypatch):
+    """The challenger switched off for one test (it has no parameter to: it is part of
+    the per-image decision, docs/method.md section 7)."""
+    from drake_tracker.core.robustness.second_opinion import EncoderSearch
+
+    monkeypatch.setattr(EncoderSearch, "challenge", lambda self, *args: (None, None))

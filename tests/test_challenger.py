@@ -6,6 +6,7 @@ at biases of 30-55 deg (the bias model's spread is 10.3 deg), 100-570 mm off, an
 image contradicted it enough for the one-image second opinion.
 """
 
+import dataclasses
 import logging
 import time
 
@@ -19,7 +20,6 @@ from drake_tracker.core.filter.start import full_reading
 from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.robustness.health import (
     Challenger,
-    HealthParams,
     TrackerHealth,
     next_health,
 )
@@ -83,18 +83,14 @@ def test_an_implausible_bias_fails_the_innovation_tests_false_alarm_probability(
     assert tail == pytest.approx(FALSE_ALARM_PROBABILITY, rel=1e-9)
 
 
-@pytest.mark.parametrize("field, value", [("challenger_images", -1)])
-def test_bad_challenger_parameters_are_named(field, value):
-    with pytest.raises(ValueError, match=f"health.{field}"):
-        HealthParams(**{field: value}).validate()
-
-
-def run_images(processor, frame, prior, count, elapsed_s=0.1):
+def run_images(processor, frame, prior, count, elapsed_s=0.1, period_s=0.0):
     """Feeds the same image ``count`` times against the same prior, the health carried
-    from image to image; returns the outcomes."""
+    from image to image, image k stamped ``k * period_s`` after ``frame``; returns the
+    outcomes."""
     health, outcomes = TrackerHealth(acquired=True), []
-    for _ in range(count):
-        outcome = processor.observe(frame, prior, elapsed_s, health)
+    for k in range(count):
+        image = dataclasses.replace(frame, capture_time_s=frame.capture_time_s + k * period_s)
+        outcome = processor.observe(image, prior, elapsed_s, health)
         outcomes.append(outcome)
         health = next_health(health, outcome.consistency, processor.params.health,
                              outcome.restarted, outcome.misplaced, outcome.challenger)
@@ -103,8 +99,8 @@ def run_images(processor, frame, prior, count, elapsed_s=0.1):
     return outcomes
 
 
-def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(scene,  # noqa: F811
-                                                                            caplog):
+def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(
+        scene, caplog, request):  # noqa: F811
     """A confident belief (0.05 deg) with the elbow bent 40 deg, and no bias jump admitted
     (images 0 s apart): the update cannot leave it, as the protocol's fold could not. The
     one-image second opinion is off; the challenger, started because the elbow's bias
@@ -123,12 +119,12 @@ def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(sce
     encoders = hand_error_mm(model, truth, full_reading(model, reading))
     start = hand_error_mm(model, truth, prior[MEAN_A])
     with caplog.at_level(logging.WARNING):
-        outcomes = run_images(processor, frame, prior, params.health.challenger_images, 0.0)
+        outcomes = run_images(processor, frame, prior, 20, 0.0)
     assert outcomes[-1].restarted and "a challenger searched from the encoders' arm" \
         in caplog.text
     assert outcomes[-1].challenger is None  # it won: none is left
     after = hand_error_mm(model, truth, outcomes[-1].observation.apply(prior)[MEAN_A])
-    params.health.challenger_images = 0
+    request.getfixturevalue("no_challenger")
     alone = run_images(ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)), frame,
     prior, len(outcomes),
                        0.0)
@@ -149,17 +145,18 @@ def test_a_plausible_estimate_starts_no_challenger(scene):  # noqa: F811
 
 def test_a_challenger_rests_as_long_as_it_searched(scene):  # noqa: F811
     """A robot whose bias really is that large: the challenger never wins (margin out of
-    reach), searches ``challenger_images`` images, rests as long, then starts afresh."""
+    reach), searches for ``max_unconfirmed_s`` (two images 0.1 s apart), rests as long,
+    then starts afresh."""
     model, truth, reading, frame = scene
     prior = prior_at(model, reading, truth)
     prior[MEAN_B][model.joint_names.index("arm_joint_3")] = np.radians(40.0)
     params = TrackerParams()
     params.health.second_opinion_agreement = 0.0
     params.health.second_opinion_margin_nats_per_pixel = 1e2
-    params.health.challenger_images = 2
+    params.health.max_unconfirmed_s = 0.2
     params.image.acquisition_num_particles = 10
     outcomes = run_images(ImageProcessor(model, CAMERA, resolve_tracker_params(params, model)),
-    frame, prior, 6)
+                          frame, prior, 6, period_s=0.1)
     images = [o.challenger.images for o in outcomes]
     assert images == [1, 2, 3, 4, 1, 2]
     searched = [o.challenger.offset_mean for o in outcomes]

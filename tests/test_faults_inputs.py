@@ -54,6 +54,8 @@ def test_an_empty_parameter_file_gives_the_defaults(tmp_path):
      "kalman.overrides.arm_joint_1.match_bias_noise_to_images: removed"),
     (load_tracker_params, "health:\n  challenger_bias_sigmas: 2.25\n",
      "health.challenger_bias_sigmas: removed"),
+    (load_tracker_params, "health:\n  challenger_images: 20\n",
+     "health.challenger_images: removed"),
     (load_scenario, "duration_s: long\n", "duration_s: 'long' (expected a number)"),
     (load_scenario, "preset: 3\n", "preset: 3 (expected a preset name"),
     (load_scenario, "camera:\n  rate_hz: [30]\n", "camera.rate_hz: [30] (expected a number)"),

@@ -186,7 +186,8 @@ def test_a_bias_step_is_reacquired_within_two_seconds(apollo, step_run):
     assert e[t >= 3.5].max() < 10.0
 
 
-def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(apollo, step_run):
+def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(apollo, step_run,
+                                                                         no_challenger):
     """No bias jump and no search from the encoders' arm (the second opinion, the
     challenger): the filter follows the 10 deg step at the pace of its random walk, and
     the images that see through the arm say so. (With only the jumps off, the second
@@ -194,7 +195,6 @@ def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(apollo,
     params = TrackerParams()
     params.kalman.robot_joints.bias_jump_rate_per_s = 0.0
     params.health.second_opinion_agreement = 0.0
-    params.health.challenger_images = 0
     errors, lost_at = _track_step(apollo, step_run, params, step_s=1.5)
     assert lost_at is not None and lost_at <= 2.5, lost_at
 

@@ -220,7 +220,8 @@ def test_an_image_that_agrees_with_the_encoders_and_not_the_estimate_restarts_it
     assert health.restarts == 1 and not health.acquired
 
 
-def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough(scene):
+def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough(scene,
+                                                                                no_challenger):
     """The encoders are -6 deg off on arm joints 2 and 4 (the image sees through 42 % of
     their arm): the out-of-view estimate stays until ``max_unconfirmed_s``. (Its
     100 deg shoulder bias is implausible: at the defaults the challenger belief restarts
@@ -231,7 +232,6 @@ def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough
         np.radians(-6.0)
     prior = out_of_view_prior(model, truth, bias)
     params = TrackerParams()
-    params.health.challenger_images = 0
     processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     encoders = processor.restart.apply(prior)[MEAN_A]
     before = hand_error_mm(model, truth, encoders)

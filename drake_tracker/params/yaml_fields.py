@@ -30,9 +30,10 @@ RETIRED_FIELDS = {
                                         "have bias jumps",
     "health.challenger_bias_sigmas": "removed: a bias is implausible where the bias "
                                      "model's own test rejects it, at the innovation "
-                                     "test's false-alarm probability (2.81 of its spread); "
-                                     "health.challenger_images 0 switches the challenger "
-                                     "off",
+                                     "test's false-alarm probability (2.81 of its "
+                                     "spread)",
+    "health.challenger_images": "removed: a challenger searches for "
+                                "health.max_unconfirmed_s, then rests as long",
     "health.no_arm_see_through": "removed: an image shows no arm when it sees behind "
                                  "all but fewer than health.min_robot_pixels of both the "
                                  "estimate's and the encoders' rendered arm",

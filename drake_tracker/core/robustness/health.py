@@ -121,8 +121,9 @@ class HealthParams:
     #: view, and 50 particles put it behind the scene (0.8 m). And the belief restarts
     #: from the encoders once the images have shown the estimate's arm out of view, and
     #: the encoders' in view, for as long: see ``ImageProcessor.restart_reason`` in
-    #: ``core/image_processor.py``. (It replaces ``reacquire_after_s`` and
-    #: ``restart_after_misplaced_s``, both 1 s.)
+    #: ``core/image_processor.py``. A challenger belief (``Challenger``) searches as
+    #: long, then rests as long. (It replaces ``reacquire_after_s`` and
+    #: ``restart_after_misplaced_s``, both 1 s, and ``challenger_images``, 20 images.)
     max_unconfirmed_s: float = 1.0
     #: An estimate that renders fewer robot pixels than this fraction of the encoders'
     #: arm is misplaced (``is_misplaced``). Measured on s-head-arm/time-varying seed 0 (the
@@ -142,11 +143,6 @@ class HealthParams:
     #: test at every resolution. 0.021: 100 nats at the quick suite's 4,730 valid
     #: pixels (80 x 60), the fixed margin it replaces.
     second_opinion_margin_nats_per_pixel: float = 0.021
-    #: While some joint's bias estimate is implausible (the bias model's own test rejects
-    #: it: ``second_opinion.IMPLAUSIBLE_BIAS_SIGMAS``), a challenger belief searches from
-    #: the encoders' arm for this many images, then rests as long
-    #: (``core/robustness/second_opinion.py``). 0: never.
-    challenger_images: int = 20
     #: The state is reported ``tracking`` only while the latest ``images_in_a_row``
     #: images each confirm
     #: (agree with, within 3σ of the pixel noise) at least this fraction of the robot
@@ -174,7 +170,6 @@ class HealthParams:
              "must be in [0, 1] (0: never)"),
             ("second_opinion_margin_nats_per_pixel",
              0 <= self.second_opinion_margin_nats_per_pixel < 1e3, "must be in [0, 1e3)"),
-            ("challenger_images", self.challenger_images >= 0, "must be >= 0 (0: never)"),
             ("tracking_agreement", 0 <= self.tracking_agreement <= 1,
              "must be in [0, 1] (0: see-through alone decides)"),
         )
@@ -188,10 +183,11 @@ class Challenger:
     """A second belief about the angles, held relative to the encoders' arm (so it
     follows the readings between images, as a bias does): angle ``offset_mean`` (n,)
     and ``offset_var`` (rad, rad^2) from the restart's mean; ``time_s``, the image time
-    of its latest update; ``images``, the images it has seen. It searches for
-    ``HealthParams.challenger_images`` images, then rests as long (no search: a robot
-    whose biases really are that large pays at most half the time), then may start
-    again."""
+    of its latest update; ``images``, the images it has seen; ``started_s``, the image
+    time of its first (default ``time_s``). It searches for
+    ``HealthParams.max_unconfirmed_s``, the longest the tracker holds a belief that no
+    image confirms, then rests as long (no search: a robot whose biases really are that
+    large pays at most half the time), then may start again."""
 
     offset_mean: np.ndarray
     offset_var: np.ndarray
@@ -200,6 +196,11 @@ class Challenger:
     #: (n,) the camera offset it searches from, the estimate's at its start (virtual
     #: joints; NaN elsewhere: ``Restart.pinned_angle``).
     pinned_angle: np.ndarray | None = None
+    started_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.started_s is None:
+            object.__setattr__(self, "started_s", self.time_s)
 
 
 @dataclass(frozen=True)

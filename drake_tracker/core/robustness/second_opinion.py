@@ -329,20 +329,19 @@ class EncoderSearch:
         longer needed). It starts while the estimate (``prior``) has an implausible bias,
         and searches from the restart's belief at this image, seen from the camera whose
         search did best on its first image (``restarts``), for
-        ``health.challenger_images`` images; ``tracker``, the health before this image,
-        holds the challenger so far."""
-        health, challenger = self.params.health, tracker.challenger
-        if health.challenger_images == 0:
-            return None, None
+        ``health.max_unconfirmed_s`` (the longest a belief no image confirms is held),
+        then rests as long; ``tracker``, the health before this image, holds the
+        challenger so far."""
+        challenger, hold_s = tracker.challenger, self.params.health.max_unconfirmed_s
         implausible = implausible_biases(prior, self.plausible_std, IMPLAUSIBLE_BIAS_SIGMAS)
         if challenger is None and not implausible.any():
             return None, None
+        if challenger is not None and time_s - challenger.started_s >= 2 * hold_s:
+            challenger = None  # rested: a fresh start if still needed
+        if challenger is not None and time_s - challenger.started_s >= hold_s:  # resting
+            return None, replace(challenger, time_s=time_s, images=challenger.images + 1)
         images = 0 if challenger is None else challenger.images
-        if images >= 2 * health.challenger_images:  # rested: a fresh start if still needed
-            challenger, images = None, 0
-        if images >= health.challenger_images:  # resting
-            return None, Challenger(challenger.offset_mean, challenger.offset_var, time_s,
-                                    images + 1, challenger.pinned_angle)
+        started_s = time_s if challenger is None else challenger.started_s
         restarts = (self.restarts(prior) if challenger is None
                     else [self.restart.pinned(challenger.pinned_angle)])
         starts = [(challenger_prior(r.apply(prior), challenger, time_s, self._growth), r)
@@ -368,4 +367,4 @@ class EncoderSearch:
         floor = ch_prior[VAR_A] / self.update.num_particles
         return None, Challenger(alternative.mean - candidate[MEAN_A],
                                 np.maximum(alternative.variance, floor), time_s, images + 1,
-                                restart.pinned_angle)
+                                restart.pinned_angle, started_s)
