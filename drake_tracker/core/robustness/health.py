@@ -320,6 +320,15 @@ def drifts(image: ImageConsistency, health: TrackerHealth, params: HealthParams)
         and agreeing_pixels(image) < params.tracking_agreement * visible)
 
 
+def confirms_more(image: ImageConsistency, other: ImageConsistency,
+                  params: HealthParams) -> bool:
+    """Whether an image agrees with one rendered arm (``image``) on at least
+    ``min_robot_pixels`` and on more pixels than with another (``other``): it shows the
+    first arm, and more of it than of the second."""
+    agreeing = agreeing_pixels(image)
+    return agreeing >= params.min_robot_pixels and agreeing > agreeing_pixels(other)
+
+
 def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,
                  params: HealthParams) -> bool:
     """Whether an image finds the encoders' arm (zero bias) in view and the estimate's
