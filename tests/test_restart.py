@@ -157,14 +157,21 @@ def test_health_counts_misplaced_time_and_a_restart_resets_it():
 
 
 def test_an_estimate_that_renders_under_half_the_encoders_arm_is_misplaced():
+    """Unless the image shows the estimate's arm more than the encoders' (``confirms_more``):
+    a rendered size is not evidence."""
     params = HealthParams()  # min_robot_pixels 30, misplaced_fraction 0.5
     seen = [ImageConsistency(0.0, n, 1.0, 0.0) for n in (0, 29, 343, 390, 600)]
-    encoders = ImageConsistency(0.0, 782, 0.0, 0.5)
+    encoders = ImageConsistency(0.0, 782, 0.9, 0.05)  # 704 pixels agree
     assert [is_misplaced(e, encoders, params) for e in seen] == [True] * 4 + [False]
-    few = ImageConsistency(0.0, 40, 0.0, 0.5)  # the encoders' arm barely in view
+    few = ImageConsistency(0.0, 40, 0.9, 0.05)  # the encoders' arm barely in view
     assert [is_misplaced(e, few, params) for e in seen] == [True, True, False, False, False]
-    none = ImageConsistency(0.0, 29, 0.0, 0.5)  # out of view: nothing to compare with
+    none = ImageConsistency(0.0, 29, 0.9, 0.05)  # out of view: nothing to compare with
     assert not any(is_misplaced(e, none, params) for e in seen)
+    # The encoders' arm seen through: only an estimate the image shows less of (fewer
+    # than min_robot_pixels agreeing) is misplaced.
+    refuted = ImageConsistency(0.0, 782, 0.0, 1.0)
+    assert [is_misplaced(e, refuted, params) for e in seen] == [True, True, False, False,
+                                                               False]
 
 
 def test_an_image_confirms_one_arm_more_only_with_enough_agreeing_pixels():
@@ -277,9 +284,9 @@ def test_an_estimate_the_image_confirms_does_not_restart_to_an_encoders_arm_it_r
         scene, no_challenger):
     """A bias that drifted far (the shoulder 30 deg, the upper arm -40) swings the
     encoders' arm towards the camera: it renders more than twice the estimate's pixels,
-    so the estimate counts as misplaced (``is_misplaced``), while the image sees behind
-    all of the encoders' arm and confirms the estimate's. The restart is due, and does
-    not happen: the image confirms the estimate's arm more. (Measured on a 30 s random walk
+    so by its size the estimate would count as misplaced, while the image sees behind
+    all of the encoders' arm and confirms the estimate's: it is not misplaced, and does
+    not restart when a second of misplaced images is up. (Measured on a 30 s random walk
     of 3 deg/sqrt(s), the restart threw 29 deg of bias away each second from 17.9 s, the
     hand 100-750 mm off for most of 12 s, the estimate 2-57 mm before.)"""
     model, truth, frame = scene
@@ -297,7 +304,8 @@ def test_an_estimate_the_image_confirms_does_not_restart_to_an_encoders_arm_it_r
     outcome = processor.observe(frame, prior, 0.1, due)
     encoders = processor.restart.apply(prior)[MEAN_A]
     assert hand_error_mm(model, truth, encoders) > 300.0
-    assert outcome.misplaced and not outcome.restarted
+    assert outcome.consistency.robot_pixels < 0.5 * 2143  # by its size, misplaced
+    assert not outcome.misplaced and not outcome.restarted
     assert hand_error_mm(model, truth, outcome.observation.apply(prior)[MEAN_A]) < 15.0
     assert processor.restart_reason(outcome.consistency, replace(
         outcome.consistency, agreement=0.0, see_through=1.0, robot_pixels=2143), due) == ""

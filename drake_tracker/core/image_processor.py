@@ -38,7 +38,6 @@ from drake_tracker.core.robustness.health import (
     ImageConsistency,
     TrackerHealth,
     agreeing_pixels,
-    confirms_more,
     drifts,
     image_consistency,
     is_consistent,
@@ -344,22 +343,21 @@ class ImageProcessor:
         * it contradicts the estimate, or cannot see it, while it agrees with the
           encoders' arm, and on more pixels;
         * the estimate has put the arm out of view while the encoders put it in view
-          (``is_misplaced``) for ``health.max_unconfirmed_s``, unless the image shows
-          the estimate's arm more than the encoders' (``confirms_more``). Measured: a
+          (``is_misplaced``: an image that shows the estimate's arm more than the
+          encoders' does not count) for ``health.max_unconfirmed_s``. Measured: a
           second of images without the arm (the fault matrix's arm_out_of_view) moved
           the estimate out of view, which explains them best, and then no image could
-          bring it back (840 mm 4 s after the arm returned). Without the exception, an
-          encoders' arm that a drifted bias swung towards the camera (rendering twice
-          the pixels, all seen through) restarted a confirmed estimate each second (a
-          30 s random walk of 3 deg/sqrt(s): 100-750 mm for most of 12 s;
-          ``docs/method.md`` §7).
+          bring it back (840 mm 4 s after the arm returned). Counting the images that
+          confirmed the estimate, an encoders' arm that a drifted bias swung towards
+          the camera (rendering twice the pixels, all seen through) restarted a
+          confirmed estimate each second (a 30 s random walk of 3 deg/sqrt(s):
+          100-750 mm for most of 12 s; ``docs/method.md`` §7).
         """
         if not self.consistent(estimate) and self.consistent(encoders) and (
                 agreeing_pixels(encoders) > agreeing_pixels(estimate)):
             return "it agrees with the encoders' arm and not with the estimate"
         if is_misplaced(estimate, encoders, self.params.health) and restart_due(
-                health, estimate.time_s, self.params.health) and not confirms_more(
-                estimate, encoders, self.params.health):
+                health, estimate.time_s, self.params.health):
             return (f"the estimate has put the arm out of view since "
                     f"{health.misplaced_since_s:.3f} s while the encoders put it in view")
         return ""

@@ -333,9 +333,13 @@ def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,
                  params: HealthParams) -> bool:
     """Whether an image finds the encoders' arm (zero bias) in view and the estimate's
     (mostly) out of it: the estimate renders fewer robot pixels (on valid image pixels)
-    than ``min_robot_pixels`` or ``misplaced_fraction`` of the encoders'."""
+    than ``min_robot_pixels`` or ``misplaced_fraction`` of the encoders', and the image
+    does not show the estimate's arm more than the encoders' (``confirms_more``). A
+    rendered size is not evidence: a bias that drifted far can swing the encoders' arm
+    towards the camera, where it renders twice the true arm's pixels."""
     return encoders.robot_pixels >= params.min_robot_pixels and estimate.robot_pixels < max(
-        params.min_robot_pixels, params.misplaced_fraction * encoders.robot_pixels)
+        params.min_robot_pixels, params.misplaced_fraction * encoders.robot_pixels) and (
+        not confirms_more(estimate, encoders, params))
 
 
 def restart_due(health: TrackerHealth, time_s: float, params: HealthParams) -> bool:
