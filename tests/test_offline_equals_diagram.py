@@ -105,6 +105,12 @@ def _restart(p):
     p.health.misplaced_fraction, p.health.max_unconfirmed_s = 0.99, 1e-6
 
 
+def _nearer(run):
+    """Every depth 10 cm nearer: the image confirms neither the estimate's arm nor the
+    encoders' (both hidden), so a misplaced estimate restarts (``is_misplaced``)."""
+    return replace(run, depth_images_m=run.depth_images_m - np.float32(0.1)), None, None
+
+
 def _second_opinion(p):
     p.health.second_opinion_agreement, p.health.second_opinion_margin_nats_per_pixel = 1.0, 0.0
     p.image.num_particles = 5
@@ -135,7 +141,8 @@ CASES = {
     "an encoder clock step forward": Case(faults=_encoder_step_forward, some_skipped=True,
                                           offline_log=("in a gap of the readings at the "
                                                        "same lag",)),
-    "restart": Case(bias_deg=4.0, tune=_restart, min_restarts=1),
+    "restart": Case(bias_deg=4.0, tune=_restart, faults=_nearer, min_restarts=1,
+                    offline_log=("while the encoders put it in view",)),
     "second opinion": Case(bias_deg=0.5, tune=_second_opinion, min_restarts=1,
                            offline_log=("search from the encoders' arm explains it better",)),
     "challenger": Case(bias_deg=0.5, tune=_challenger, min_restarts=1,
