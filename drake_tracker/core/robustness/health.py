@@ -323,8 +323,7 @@ def drifts(image: ImageConsistency, health: TrackerHealth, params: HealthParams)
 def confirms_more(image: ImageConsistency, other: ImageConsistency,
                   params: HealthParams) -> bool:
     """Whether an image agrees with one rendered arm (``image``) on at least
-    ``min_robot_pixels`` and on more pixels than with another (``other``): it shows the
-    first arm, and more of it than of the second."""
+    ``min_robot_pixels``, and on more pixels than with another (``other``)."""
     agreeing = agreeing_pixels(image)
     return agreeing >= params.min_robot_pixels and agreeing > agreeing_pixels(other)
 
