@@ -16,6 +16,7 @@ from drake_tracker.core.filter.estimate import PoseReadout
 from drake_tracker.core.filter.kalman import COV_AB, MEAN_A, MEAN_B, VAR_A, VAR_B
 from drake_tracker.core.filter.start import full_reading, new_bank_and_belief
 from drake_tracker.core.image_processor import ImageProcessor
+from drake_tracker.core.likelihood.occlusion import observed_image
 from drake_tracker.core.render.backends import make_renderer
 from drake_tracker.core.render.configurations import default_view_configuration
 from drake_tracker.core.robustness.health import (
@@ -23,6 +24,7 @@ from drake_tracker.core.robustness.health import (
     ImageConsistency,
     TrackerHealth,
     confirms_more,
+    image_consistency,
     is_misplaced,
     next_health,
     restart_due,
@@ -304,11 +306,16 @@ def test_an_estimate_the_image_confirms_does_not_restart_to_an_encoders_arm_it_r
     outcome = processor.observe(frame, prior, 0.1, due)
     encoders = processor.restart.apply(prior)[MEAN_A]
     assert hand_error_mm(model, truth, encoders) > 300.0
-    assert outcome.consistency.robot_pixels < 0.5 * 2143  # by its size, misplaced
+    # The encoders' arm against the same image, as the processor compares it.
+    observed = observed_image(processor.update.prepare(frame.depth_m))
+    seen = image_consistency(outcome.consistency.time_s,
+                             processor.update.renderer.render(encoders[None])[0], observed,
+                             processor.params.image.likelihood)
+    assert seen.see_through > 0.95  # the image sees behind the encoders' arm
+    assert outcome.consistency.robot_pixels < 0.5 * seen.robot_pixels  # by size, misplaced
     assert not outcome.misplaced and not outcome.restarted
     assert hand_error_mm(model, truth, outcome.observation.apply(prior)[MEAN_A]) < 15.0
-    assert processor.restart_reason(outcome.consistency, replace(
-        outcome.consistency, agreement=0.0, see_through=1.0, robot_pixels=2143), due) == ""
+    assert processor.restart_reason(outcome.consistency, seen, due) == ""
 
 
 def test_an_image_that_scores_every_particle_the_same_leaves_the_belief(scene):
