@@ -247,6 +247,19 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     assert {r["health"] for r in rows if r["method"] == "encoders_only"} == {""}
     states = {r["health"] for r in rows if r["method"] == "full_fusion"}
     assert states <= {"", "tracking", "uncertain", "lost"} and "tracking" in states
+    # Each camera's frame against the truth: for the only camera, the hand in its frame
+    # is errors.csv's output, sample by sample (the world is the model here); the
+    # encoders alone estimate no camera.
+    with (tmp_path / "cameras.csv").open() as f:
+        cameras = list(csv.DictReader(f))
+    assert {(r["method"], r["camera"]) for r in cameras} == {("full_fusion", "camera")}
+    fusion = [r for r in rows if r["method"] == "full_fusion"]
+    assert [r["time_s"] for r in cameras] == [r["time_s"] for r in fusion]
+    for key, column in (("hand_mm", "translation_mm"), ("hand_deg", "rotation_deg")):
+        np.testing.assert_allclose([float(r[key]) for r in cameras],
+                                   [float(r[column]) for r in fusion], atol=2e-4)
+    assert "| s-full-arm | constant | full_fusion | camera | 1 |" in (
+        tmp_path / "cameras.md").read_text()
     with (tmp_path / "summary.csv").open() as f:
         written = list(csv.DictReader(f))
     assert len(written) == len(summary) == 2 * 2

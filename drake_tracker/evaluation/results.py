@@ -67,10 +67,15 @@ class ResultStore:
         return self.stored_errors(task.name) is not None
 
     def write(self, payload: dict) -> None:
-        """Writes a task's payload (from :func:`~.tasks.compute_task`), CSV last."""
+        """Writes a task's payload (from :func:`~.tasks.compute_task`), its errors CSV
+        last; each camera's frame against the truth (``cameras_csv``, if any) goes to
+        ``results/cameras/<name>.csv.gz``."""
         name = payload["name"]
-        meta = {k: v for k, v in payload.items() if k != "csv"}
+        meta = {k: v for k, v in payload.items() if k not in ("csv", "cameras_csv")}
         _write_atomic(self.results_dir / f"{name}.json", json.dumps(meta, indent=1))
+        if payload.get("cameras_csv"):
+            _write_atomic(self._cameras_path(name), gzip.compress(
+                payload["cameras_csv"].encode(), compresslevel=9, mtime=0))
         _write_atomic(self.result_path(name),
                       gzip.compress(payload["csv"].encode(), compresslevel=9, mtime=0))
 
@@ -83,6 +88,19 @@ class ResultStore:
         rows = []
         for name in sorted(names):
             rows.extend(self.read_errors(name))
+        return rows
+
+    def _cameras_path(self, name: str) -> Path:
+        return self.results_dir / "cameras" / f"{name}{_ERRORS_SUFFIXES[0]}"
+
+    def load_camera_rows(self, tasks: list[Task]) -> list[dict]:
+        """The stored per-camera samples (``camera_frames.CAMERA_COLUMNS``) of the done
+        ``tasks`` that have them (results stored before they were written have none)."""
+        rows = []
+        for task in sorted(tasks, key=lambda t: t.name):
+            path = self._cameras_path(task.name)
+            if path.exists() and self.is_done(task):
+                rows.extend(read_errors_csv(path))
         return rows
 
     def load_metas(self, tasks: list[Task]) -> list[dict]:

@@ -13,6 +13,7 @@ from contextlib import closing
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from drake_tracker.evaluation.camera_frames import camera_summary
 from drake_tracker.evaluation.executor_choice import make_executor
 from drake_tracker.evaluation.executors import Executor, SerialExecutor
 from drake_tracker.evaluation.health_calibration import (
@@ -89,8 +90,9 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
              settle_s: float = SETTLE_S, progress: bool = True) -> list[dict]:
     """Runs the tasks not done yet in ``out_dir`` and writes errors.csv, the summary
     (summary.csv, summary.txt), paper_comparison.md, health_confusion.md (the health
-    state against the error: ``health_calibration.py``), failures.json and the figures
-    there; returns the summary rows."""
+    state against the error: ``health_calibration.py``), cameras.csv and cameras.md
+    (each camera's frame against the truth: ``camera_frames.py``), failures.json and the
+    figures there; returns the summary rows."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     check_same_protocol(tasks, out_dir)
@@ -123,6 +125,7 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
     (out_dir / "health_confusion.md").write_text(
         f"# The health state against the hand's error, from {settle_s:g} s on\n\n"
         + health + "\n")
+    _write_camera_frames(store.load_camera_rows(tasks), out_dir, settle_s)
     if rows:
         first_seed = {}
         for t in tasks:
@@ -138,6 +141,20 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
         print(f"wrote {out_dir}/summary.csv (errors from t = {settle_s:g} s on), errors.csv, "
               f"protocol.json and figures")
     return summary
+
+
+def _write_camera_frames(rows: list[dict], out_dir: Path, settle_s: float) -> None:
+    """``cameras.csv`` and ``cameras.md``: each camera's frame against the truth
+    (``camera_frames.py``), when some task has them."""
+    if not rows:
+        return
+    with (out_dir / "cameras.csv").open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    (out_dir / "cameras.md").write_text(
+        "# Each camera's frame against the truth, over the whole run\n\n"
+        + camera_summary(rows, settle_s) + "\n")
 
 
 def cost_line(metas: list[dict], wall_s: float, tasks_run: int) -> str:

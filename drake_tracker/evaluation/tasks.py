@@ -168,11 +168,14 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
     """Errors of each method on one recorded run, at regular sample times.
 
     ``tracker_seed`` is added to the parameters' ``image.seed``. Returns
-    {method: {"times_s", "translation_mm", "rotation_deg"}}; each method's wall time
+    {method: {"times_s", "translation_mm", "rotation_deg", "health"}}, and for a replayed
+    method "cameras", each camera's frame against the truth
+    (``camera_frames.camera_frame_errors``); each method's wall time
     goes into ``wall_s`` if given (and, before this process's first replay, the
     kernels' loading into ``wall_s["kernel_warm_up"]``), and each tracking method's
     image times (``ReplayResult.decision_times``) into ``decision_times``.
     """
+    from drake_tracker.evaluation.camera_frames import camera_frame_errors, true_positions
     from drake_tracker.io.replay import encoders_only_X_CE, model_for_run, replay_run
     from drake_tracker.kernel_warm_up import warm_up_once
 
@@ -187,7 +190,7 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
         if report:
             report(f"{method} ({k}/{len(methods)})")
         start = time.perf_counter()
-        health = np.full(len(times), -1, int)
+        health, cameras = np.full(len(times), -1, int), None
         if method == "encoders_only":
             X = encoders_only_X_CE(run, model)[truth_index]
         else:
@@ -201,6 +204,8 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
             start = time.perf_counter()
             replay = replay_run(run, params, model, sample_times_s=times)
             X, health = replay.X_CE, replay.health
+            cameras = camera_frame_errors(model, replay.positions,
+                                          true_positions(run, model, truth_index))
             if decision_times is not None:
                 decision_times[method] = replay.decision_times
         if wall_s is not None:
@@ -211,6 +216,8 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
         t_err[ok], r_err[ok] = pose_errors(X[ok], X_true[ok])
         out[method] = {"times_s": times, "translation_mm": t_err, "rotation_deg": r_err,
                        "health": health}
+        if cameras is not None:
+            out[method]["cameras"] = cameras
     return out
 
 
@@ -311,7 +318,7 @@ def _load_or_simulate(task: Task, cache_dir: Path | None, report: Reporter):
 
 def compute_task(task: Task, cache_dir: Path | None = None,
                  report: Reporter | None = None) -> dict:
-    """Runs one task and returns its payload: ``{"name", "csv", "environment",
+    """Runs one task and returns its payload: ``{"name", "csv", "cameras_csv", "environment",
     "simulated_s", "wall_s": {"simulate", <method>...}, "decision_times": {<method>:
     {"images", "update_s", "decision_s"}}}``.
 
@@ -325,7 +332,13 @@ def compute_task(task: Task, cache_dir: Path | None = None,
     errors = evaluate_run(run, task.methods, task.min_image_interval_s,
                           base_params=task_base_params(task), tracker_seed=task.seed,
                           report=report, wall_s=wall_s, decision_times=decision_times)
+    from drake_tracker.evaluation.camera_frames import camera_errors_csv_text
+
+    cameras = {m: e["cameras"] for m, e in errors.items() if "cameras" in e}
+    times = next(iter(errors.values()))["times_s"]
     return {"name": task.name, "csv": errors_csv_text(task, errors),
+            "cameras_csv": camera_errors_csv_text(task.sequence, task.bias, task.seed, times,
+                                                  cameras),
             "environment": environment(), "simulated_s": float(run.duration_s),
             "wall_s": wall_s, "decision_times": decision_times}
 
