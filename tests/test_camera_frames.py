@@ -70,6 +70,11 @@ def test_the_truth_takes_each_cameras_offset_by_name(two_cameras):
     assert np.array_equal(q[:, model.robot_joint_indices], run.truth_positions_rad[index])
     assert np.array_equal(q[:, model.camera_joint_indices("camera")],
                           run.truth_camera_offset[index])
+    # one camera is the model's first, whatever the run calls it, as a replay takes it
+    from dataclasses import replace
+
+    renamed = true_positions(replace(run, camera_name="wrist"), model, index)
+    assert np.array_equal(renamed, q)
     with pytest.raises(ValueError, match=r"no truth for the model's cameras \['post'\]"):
         true_positions(run, two_cameras, index)
 
@@ -86,3 +91,21 @@ def test_the_summary_takes_the_median_over_seeds_of_each_seeds_median():
     (line,) = [row for row in table.splitlines() if row.startswith("| s |")]
     # per-seed medians 2, 20, 5 (p75 2.5, 25, 5.5); the offsets from 2 s: 3, 30, 6
     assert "| 3 | 5.0 / 5.5 (20.0) | 0.10 | 5.0, 0.20 | 6.0 (30.0), 0.30 (0.30) |" in line
+
+
+def test_a_camera_the_run_never_recorded_leaves_the_run_evaluated_without_camera_errors():
+    from dataclasses import replace
+
+    from drake_tracker.evaluation import evaluate_run
+
+    # a one-camera run of a robot whose configuration declares a second camera
+    run = synthetic_run(build_tracker_model(robot_preset("apollo")), duration_s=0.3, seed=2)
+    run = replace(run, robot_config_yaml=(
+        "{model_file: apollo.sdf, end_effector_frame: end_effector, added_frames: "
+        "{post_nominal: {parent: torso, xyz_m: [1.2, -1.45, 1.45], rpy_deg: [-114.44, 0.0, "
+        "38.29]}}, cameras: [{name: camera, frame: camera_optical}, "
+        "{name: post, frame: post_nominal}]}"))
+    with pytest.warns(UserWarning, match=r"no truth for the model's cameras \['post'\]"):
+        errors = evaluate_run(run, ("full_fusion",), min_image_interval_s=0.0)
+    assert "cameras" not in errors["full_fusion"]
+    assert np.isfinite(errors["full_fusion"]["translation_mm"]).any()

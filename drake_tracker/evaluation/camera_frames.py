@@ -46,9 +46,11 @@ _ERRORS = ("hand_mm", "hand_deg", "pose_mm", "pose_deg", "offset_mm", "offset_de
 
 def true_positions(run: RecordedRun, model: TrackerModel, index: np.ndarray) -> np.ndarray:
     """(T, n) the model's positions at the run's truth samples ``index``: the true robot
-    angles, and each camera's true offset on its six virtual joints (matched by name;
-    ValueError for a camera of the model the run does not have)."""
-    offsets = {run.camera_name: run.truth_camera_offset,
+    angles, and each camera's true offset on its six virtual joints. A run of one camera
+    is the model's first camera's, as a replay takes it; several are matched by name.
+    ValueError names a camera of the model the run has no truth for."""
+    offsets = {model.camera_names[0] if not run.other_cameras else run.camera_name:
+               run.truth_camera_offset,
                **{c.name: c.truth_camera_offset for c in run.other_cameras}}
     missing = [name for name in model.camera_names if name not in offsets]
     if missing:

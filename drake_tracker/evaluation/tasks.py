@@ -14,6 +14,7 @@ import io
 import os
 import platform
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from importlib import metadata
@@ -184,6 +185,11 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
     truth_index = np.clip(np.searchsorted(run.truth_times_s, times), 0,
                           len(run.truth_times_s) - 1)
     X_true = run.truth_X_CE[truth_index]
+    try:
+        truth_q = true_positions(run, model, truth_index)
+    except ValueError as error:  # e.g. a run that names its camera unlike the model
+        warnings.warn(f"{error}: no per-camera errors for this run", stacklevel=2)
+        truth_q = None
     out = {}
     methods = list(methods)
     for k, method in enumerate(methods, 1):
@@ -204,8 +210,8 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
             start = time.perf_counter()
             replay = replay_run(run, params, model, sample_times_s=times)
             X, health = replay.X_CE, replay.health
-            cameras = camera_frame_errors(model, replay.positions,
-                                          true_positions(run, model, truth_index))
+            if truth_q is not None:
+                cameras = camera_frame_errors(model, replay.positions, truth_q)
             if decision_times is not None:
                 decision_times[method] = replay.decision_times
         if wall_s is not None:
