@@ -60,8 +60,10 @@ class LcmTracker:
 def build(lcm: DrakeLcmInterface, model: TrackerModel, camera: CameraIntrinsics,
           encoder_period_s: float, params: TrackerParams | None = None,
           status_channel: str = IIWA_STATUS, image_channel: str = DRAKE_RGBD_CAMERA_IMAGES,
-          pose_channel: str = HAND_POSE_CHANNEL) -> LcmTracker:
-    """The Diagram (see the module) on ``lcm``."""
+          pose_channel: str = HAND_POSE_CHANNEL,
+          pose_lcm: DrakeLcmInterface | None = None) -> LcmTracker:
+    """The Diagram (see the module) on ``lcm``; the hand pose goes out on ``pose_lcm``
+    (default: ``lcm``), e.g. another LCM URL than the robot's."""
     builder = DiagramBuilder()
     builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
     # IiwaStatusReceiver is C++: it takes the C++ message, hence the C++ serializer.
@@ -85,7 +87,7 @@ def build(lcm: DrakeLcmInterface, model: TrackerModel, camera: CameraIntrinsics,
         name="end_effector"))
     builder.Connect(tracker.X_CE, to_message.get_pose_input_port())
     publisher = builder.AddNamedSystem("hand_pose_publisher", LcmPublisherSystem.Make(
-        pose_channel, lcmt_viewer_draw, lcm, publish_period=encoder_period_s,
+        pose_channel, lcmt_viewer_draw, pose_lcm or lcm, publish_period=encoder_period_s,
         publish_offset=0.75 * encoder_period_s))
     builder.Connect(to_message.get_message_output_port(), publisher.get_input_port())
     return LcmTracker(builder.Build(), tracker, images, status)
