@@ -7,7 +7,10 @@ intersphinx. A bare name (``OutputPort``, from an annotation imported only for t
 checking) links to the one pydrake name of the inventory it ends. A ``pydrake.`` name
 that the inventory lacks is a warning (an error with ``-W``): regenerate the inventory
 with ``python docs/_ext/pydrake_links.py``, which builds the site once, collects the
-names, checks that each is importable from pydrake, and writes the file.
+names, checks that each is importable from pydrake, and adds them to the file. The file
+keeps the names it had: run under each drake the package supports (Python 3.11 gets
+drake 1.51, 3.12 a newer one, whose signatures name more types, such as
+``SystemScalarConverter``), it lets the site build under each.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import zlib
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -108,8 +112,20 @@ def inventory_bytes(names: list[str], version: str) -> bytes:
     return header + zlib.compress(body.encode())
 
 
+def inventory_contents(path: Path = INVENTORY) -> tuple[list[str], str]:
+    """The names and the version line of an inventory :func:`inventory_bytes` wrote
+    (none and "" when there is no file)."""
+    if not path.exists():
+        return [], ""
+    data = path.read_bytes()
+    lines = data.split(b"\n", 4)
+    version = lines[2].decode().removeprefix("# Version: ")
+    body = zlib.decompress(lines[4]).decode()
+    return [line.split(" ", 1)[0] for line in body.splitlines() if line], version
+
+
 def main() -> None:
-    """Builds the site once, collecting names, and writes ``INVENTORY``."""
+    """Builds the site once, collecting names, and adds them to ``INVENTORY``."""
     import pydrake
 
     with tempfile.TemporaryDirectory() as out:
@@ -121,10 +137,17 @@ def main() -> None:
         seen = set(collected.read_text().split())
     imports = pydrake_imports()
     names = sorted({p for n in seen if (p := pydrake_name(n, imports))})
+    kept, versions = inventory_contents()
+    try:
+        version = metadata.version("drake")
+    except metadata.PackageNotFoundError:  # a source build of drake
+        version = getattr(pydrake, "__version__", "")
+    versions = ", ".join(sorted({v for v in (*versions.split(", "), version) if v}))
+    added = sorted(set(names) - set(kept))
+    names = sorted(set(names) | set(kept))
     INVENTORY.parent.mkdir(exist_ok=True)
-    INVENTORY.write_bytes(inventory_bytes(names, pydrake.__version__ if hasattr(
-        pydrake, "__version__") else ""))
-    print(f"wrote {INVENTORY}: {len(names)} names")
+    INVENTORY.write_bytes(inventory_bytes(names, versions))
+    print(f"wrote {INVENTORY}: {len(names)} names ({len(added)} new), drake {versions}")
     for name in names:
         print(" ", name)
 
