@@ -49,9 +49,9 @@ def true_positions(run: RecordedRun, model: TrackerModel, index: np.ndarray) -> 
     angles, and each camera's true offset on its six virtual joints. A run of one camera
     is the model's first camera's, as a replay takes it; several are matched by name.
     ValueError names a camera of the model the run has no truth for."""
-    offsets = {model.camera_names[0] if not run.other_cameras else run.camera_name:
-               run.truth_camera_offset,
-               **{c.name: c.truth_camera_offset for c in run.other_cameras}}
+    offsets = run.truth_offsets_by_camera
+    if not run.other_cameras:
+        offsets = {model.camera_names[0]: run.truth_camera_offset}
     missing = [name for name in model.camera_names if name not in offsets]
     if missing:
         raise ValueError(f"the run has no truth for the model's cameras {missing} (it has "
@@ -63,18 +63,20 @@ def true_positions(run: RecordedRun, model: TrackerModel, index: np.ndarray) -> 
     return q
 
 
-def camera_frame_errors(model: TrackerModel, positions: np.ndarray,
-                        truth: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+def camera_frame_errors(model: TrackerModel, positions: np.ndarray, truth: np.ndarray,
+                        truth_poses: dict | None = None) -> dict[str, dict[str, np.ndarray]]:
     """Per camera of ``model``, the (T,) errors of the module's list, estimated positions
     ``positions`` (T, n; NaN rows, before the tracker started, give NaN) against
-    ``truth`` (T, n), through the model's plant."""
+    ``truth`` (T, n), through the model's plant. ``truth_poses``: :func:`camera_poses`
+    of ``truth``, when the caller scores several estimates against one truth."""
     positions, truth = np.asarray(positions, float), np.asarray(truth, float)
     if positions.shape != truth.shape or positions.ndim != 2 or (
             positions.shape[1] != model.num_joints):
         raise ValueError(f"positions {positions.shape} and truth {truth.shape} must both "
                          f"be (T, {model.num_joints})")
-    est, true = _camera_poses(model, positions), _camera_poses(model, truth)
-    X_WE_est, X_WE_true = est.pop(None), true.pop(None)
+    est = camera_poses(model, positions)
+    true = camera_poses(model, truth) if truth_poses is None else truth_poses
+    X_WE_est, X_WE_true = est[None], true[None]
     ok = np.all(np.isfinite(positions), axis=1)
     out = {}
     for name in model.camera_names:
@@ -92,7 +94,7 @@ def camera_frame_errors(model: TrackerModel, positions: np.ndarray,
     return out
 
 
-def _camera_poses(model: TrackerModel, positions: np.ndarray) -> dict:
+def camera_poses(model: TrackerModel, positions: np.ndarray) -> dict:
     """{camera name: (T, 4, 4) X_WC, None: (T, 4, 4) X_WE} at each row of ``positions``
     (identity where a row is not finite)."""
     plant = model.plant

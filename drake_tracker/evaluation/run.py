@@ -107,11 +107,7 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
     failures = run_tasks(executor, runner, todo, store.write, progress)
     store.write_failures(failures)
     rows = store.load_rows(tasks)
-    with (out_dir / "errors.csv").open("w", newline="") as f:
-        if rows:
-            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
+    _write_rows(out_dir / "errors.csv", rows)
     metas = store.load_metas(tasks)
     record_environments(out_dir, metas)
     summary = summarize(rows, settle_s)
@@ -143,15 +139,21 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
     return summary
 
 
+def _write_rows(path: Path, rows: list[dict]) -> None:
+    """``rows`` (dicts with the same keys) as a CSV with a header (empty: no rows)."""
+    with path.open("w", newline="") as f:
+        if rows:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+
+
 def _write_camera_frames(rows: list[dict], out_dir: Path, settle_s: float) -> None:
     """``cameras.csv`` and ``cameras.md``: each camera's frame against the truth
     (``camera_frames.py``), when some task has them."""
     if not rows:
         return
-    with (out_dir / "cameras.csv").open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    _write_rows(out_dir / "cameras.csv", rows)
     (out_dir / "cameras.md").write_text(
         "# Each camera's frame against the truth, over the whole run\n\n"
         + camera_summary(rows, settle_s) + "\n")

@@ -24,6 +24,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_tracker.core.robustness.health import HealthState
+from drake_tracker.evaluation.camera_frames import (
+    camera_errors_csv_text,
+    camera_frame_errors,
+    camera_poses,
+    true_positions,
+)
 from drake_tracker.evaluation.methods import method_params
 from drake_tracker.metrics import pose_errors
 
@@ -176,7 +182,6 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
     kernels' loading into ``wall_s["kernel_warm_up"]``), and each tracking method's
     image times (``ReplayResult.decision_times``) into ``decision_times``.
     """
-    from drake_tracker.evaluation.camera_frames import camera_frame_errors, true_positions
     from drake_tracker.io.replay import encoders_only_X_CE, model_for_run, replay_run
     from drake_tracker.kernel_warm_up import warm_up_once
 
@@ -187,6 +192,7 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
     X_true = run.truth_X_CE[truth_index]
     try:
         truth_q = true_positions(run, model, truth_index)
+        truth_poses = camera_poses(model, truth_q)  # once, for every replayed method
     except ValueError as error:  # e.g. a run that names its camera unlike the model
         warnings.warn(f"{error}: no per-camera errors for this run", stacklevel=2)
         truth_q = None
@@ -211,7 +217,7 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
             replay = replay_run(run, params, model, sample_times_s=times)
             X, health = replay.X_CE, replay.health
             if truth_q is not None:
-                cameras = camera_frame_errors(model, replay.positions, truth_q)
+                cameras = camera_frame_errors(model, replay.positions, truth_q, truth_poses)
             if decision_times is not None:
                 decision_times[method] = replay.decision_times
         if wall_s is not None:
@@ -338,13 +344,11 @@ def compute_task(task: Task, cache_dir: Path | None = None,
     errors = evaluate_run(run, task.methods, task.min_image_interval_s,
                           base_params=task_base_params(task), tracker_seed=task.seed,
                           report=report, wall_s=wall_s, decision_times=decision_times)
-    from drake_tracker.evaluation.camera_frames import camera_errors_csv_text
-
     cameras = {m: e["cameras"] for m, e in errors.items() if "cameras" in e}
     times = next(iter(errors.values()))["times_s"]
     return {"name": task.name, "csv": errors_csv_text(task, errors),
             "cameras_csv": camera_errors_csv_text(task.sequence, task.bias, task.seed, times,
-                                                  cameras),
+                                                  cameras) if cameras else "",
             "environment": environment(), "simulated_s": float(run.duration_s),
             "wall_s": wall_s, "decision_times": decision_times}
 

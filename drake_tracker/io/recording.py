@@ -122,6 +122,12 @@ class RecordedRun:
         return {self.camera_name: self.camera_intrinsics} | {
             c.name: c.intrinsics for c in self.other_cameras}
 
+    @property
+    def truth_offsets_by_camera(self) -> dict[str, np.ndarray]:
+        """Every camera's (T, 6) true offset values by name, the first first."""
+        return {self.camera_name: self.truth_camera_offset} | {
+            c.name: c.truth_camera_offset for c in self.other_cameras}
+
     def __post_init__(self) -> None:
         self.validate()
 

@@ -90,8 +90,7 @@ def truth_tf_frames(run: RecordedRun) -> list[tuple[str, str, str, np.ndarray]]:
     Raises ValueError naming a camera whose true offsets are missing: none, not one row
     of six values per truth sample, or a value that is not finite."""
     frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
-    offsets = {run.camera_name: run.truth_camera_offset}
-    offsets.update({c.name: c.truth_camera_offset for c in run.other_cameras})
+    offsets = run.truth_offsets_by_camera
     expected = (len(run.truth_times_s), 6)
     out = []
     for name, frame in frames.items():
