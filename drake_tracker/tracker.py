@@ -9,7 +9,7 @@ CPF image update. Readings and images may come in any interleaving: an image sta
 
 The Drake systems in ``drake_tracker.systems`` call the same pieces
 (``drake_tracker.core.image_step``), and give the same estimates from the same data
-(``tests/test_systems.py``).
+(``tests/systems/test_systems.py``).
 """
 
 from __future__ import annotations

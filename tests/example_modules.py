@@ -1,10 +1,11 @@
 """Loads a script of ``examples/`` as a module, for the tests that call its functions."""
 
 import importlib.util
-from pathlib import Path
 from types import ModuleType
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+from repo_root import ROOT
+
+EXAMPLES = ROOT / "examples"
 
 
 def load_example(file_name: str) -> ModuleType:

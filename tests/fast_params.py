@@ -12,6 +12,16 @@ def small_params() -> TrackerParams:
     p.image.min_image_interval_s = 0.0
     # Every image (33 ms apart) is applied at once, as the offline tracker applies it, so
     # that a Diagram's estimates equal the offline tracker's (the latency's own test:
-    # tests/test_systems.py).
+    # tests/systems/test_systems.py).
     p.image.update_latency_s = 0.0
     return p
+
+
+def seeded_params(seed: int = 0) -> TrackerParams:
+    """100 particles seeded with ``seed``, the default sweeps, every image processed (the
+    offline tracker's tests and those of several cameras)."""
+    params = TrackerParams()
+    params.image.num_particles = 100
+    params.image.seed = seed
+    params.image.min_image_interval_s = 0.0
+    return params

@@ -3,9 +3,10 @@
 
 import ast
 from collections.abc import Callable
-from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent.parent / "drake_tracker"
+from repo_root import ROOT
+
+PACKAGE = ROOT / "drake_tracker"
 
 
 def walk_package(count: Callable[[ast.Module], int],

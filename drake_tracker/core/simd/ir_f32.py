@@ -8,7 +8,7 @@ the degree that double precision needs (the double-precision versions these repl
 in git history, before d9a4b87). Nothing here is called at run time: these functions
 emit IR.
 
-Accuracy (tested against libm in ``tests/test_lanes.py``): exp and log within a few
+Accuracy (tested against libm in ``tests/render/test_lanes.py``): exp and log within a few
 float32 ulps (relative 1e-6, log relative to max(1, |log y|)); erfc within 1e-6 + 2e-7 x^2
 relative on [-6, ERFC_Y_MAX_F32]: the erfcx fit (:func:`erfcx_fit_f32`, 2e-8), the
 rounding of float32 arithmetic, and exp(-y^2)'s of y^2.

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 import setuptools
+from repo_root import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 SETUPTOOLS = PYPROJECT["tool"]["setuptools"]
 

@@ -32,7 +32,7 @@ and no-readings cases still pass (the bounds do not see that difference).
 
 A camera whose sequence counter restarts is a Diagram matter (the offline tracker takes
 no sequence numbers for anything but messages): it is tested in the Diagram by
-``tests/test_timestamps.py::test_diagram_survives_glitch_step_restart_and_order_like_the_offline_tracker``.
+``tests/faults/test_timestamps.py::test_diagram_survives_glitch_step_restart_and_order_like_the_offline_tracker``.
 
 One 16 s recording (the 10 s image outage needs 4 s after it) is simulated per module;
 the faulted replays start from a snapshot of the clean replay's tracker at the fault's

@@ -6,8 +6,8 @@ import logging
 from dataclasses import replace
 
 import numpy as np
-from test_multicamera import CAMERA, two_camera_config
-from test_tracker import small_params
+from fast_params import seeded_params
+from two_cameras import CAMERA, two_camera_config
 
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.params.resolve import resolve_tracker_params
@@ -25,7 +25,7 @@ def test_a_camera_whose_pose_hides_the_arm_it_sees_restarts_its_own_pose_only():
     from drake_tracker.core.image_processor import ImageProcessor
 
     model = build_tracker_model(two_camera_config())
-    params = small_params()
+    params = seeded_params()
     params.health.min_robot_pixels = 100
     params.use_joint_readings = False  # no restart from the encoders' arm: this one alone
     resolved = resolve_tracker_params(params, model)
@@ -72,7 +72,7 @@ def test_a_camera_whose_pose_drifted_is_searched_again_with_the_held_arm_kept(ca
     )
 
     model = build_tracker_model(two_camera_config())
-    resolved = resolve_tracker_params(small_params(), model)
+    resolved = resolve_tracker_params(seeded_params(), model)
     head = ImageProcessor(model, CAMERA, resolved, camera_name="camera")
     names = model.joint_names
     truth = np.zeros(model.num_joints)

@@ -12,9 +12,9 @@ import pytest
 
 pytest.importorskip("rosbags")
 
+from cli_runs import assert_one_line_error, run_cli  # noqa: E402
 from fast_params import small_params  # noqa: E402
 from test_bag_truth import check_truth_under_tf  # noqa: E402
-from test_cli import assert_one_line_error, run_cli  # noqa: E402
 from test_estimates_bag import (  # noqa: E402
     drake_hand_in_nominal,
     hand_under_tf,

@@ -22,7 +22,7 @@ def small(mismatch: ModelMismatchConfig | None, name: str = "s-full-arm/none") -
     s.encoders.rate_hz = 100.0
     s.environment = False
     # Drake's own shapes, so that the world without a mismatch renders exactly as the
-    # model (the default meshes are within 0.3 mm: tests/test_curved_shapes.py)
+    # model (the default meshes are within 0.3 mm: tests/sim/test_curved_shapes.py)
     s.camera.curved_surface_tolerance_m = 0.0
     if mismatch is not None:
         s.model_mismatch = mismatch

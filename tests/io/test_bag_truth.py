@@ -3,8 +3,8 @@ first camera's true frame (``NAME_true``), which ``/tf`` hangs from the bag's de
 frame of the camera by the run's true camera offset, one ``TFMessage`` per truth sample
 with a transform per camera; composed, the hand in the nominal camera frame as Drake's
 kinematics give it at the true angles. A missing true offset is named before the bag is
-made. (Two cameras: ``tests/test_multicamera_bags.py``; tracking such a bag:
-``tests/test_bags.py``.)"""
+made. (Two cameras: ``tests/io/test_multicamera_bags.py``; tracking such a bag:
+``tests/io/test_bags.py``.)"""
 
 from __future__ import annotations
 

@@ -7,6 +7,7 @@ import sys
 import numba
 import numpy as np
 import pytest
+from repo_root import ROOT
 
 from drake_tracker.core.jit.numba_threading import (
     DEFAULT_GOMP_SPINCOUNT,
@@ -302,11 +303,10 @@ def test_the_parallel_compilation_stays_parallel_when_loaded_from_the_cache(tmp_
     loads both from the cache) run each on 64 iterations with 2 threads."""
     import subprocess
     import sys
-    from pathlib import Path
 
     script = tmp_path / "kernels.py"
     script.write_text(_THREAD_IDS_SCRIPT)
-    package_root = str(Path(__file__).resolve().parents[1])
+    package_root = str(ROOT)
     env = {"NUMBA_NUM_THREADS": "2", "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
            "PATH": "/usr/bin:/bin"}
     for run in ("compiles", "loads from the cache"):

@@ -10,7 +10,7 @@ import pytest
 from fast_params import small_params
 from offline_vs_diagram import feed_cameras, simulate_cameras
 from pydrake.systems.framework import DiagramBuilder
-from test_multicamera import CAMERA, two_camera_config
+from two_cameras import CAMERA, two_camera_config
 
 from drake_tracker.io.recording import CameraImages
 from drake_tracker.io.stream import ImageEvent, ReadingEvent, track_stream

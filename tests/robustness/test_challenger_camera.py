@@ -56,7 +56,7 @@ def test_a_pinned_restart_sets_the_angle_and_keeps_what_the_readings_measure():
     np.testing.assert_allclose(pinned[MEAN_A, 2:], [0.03, -0.02])
     np.testing.assert_allclose(pinned[MEAN_A] + pinned[MEAN_B], prior[MEAN_A] + prior[MEAN_B],
                                atol=1e-15)
-    # Pinning moves means only: the variances are the restart's (tests/test_restart.py).
+    # Pinning moves means only: the variances are the restart's (tests/robustness/test_restart.py).
     np.testing.assert_array_equal(pinned[VAR_A:], plain[VAR_A:])
     # It commutes with a shift of the unpinned angles, as the delay buffer needs.
     shift = np.array([0.1, -0.3, 0.0, 0.0])

@@ -1,11 +1,12 @@
 """The command line as a user meets it: one-line errors with exit code 2 and no
 traceback, nothing written before the arguments are checked, and the discovery
-commands (--version, scenarios, params). No simulation runs here (tests/test_demo.py
+commands (--version, scenarios, params). No simulation runs here (tests/apps/test_demo.py
 runs the one short demo)."""
 
-from pathlib import Path
 
 import pytest
+from cli_runs import assert_one_line_error, run_cli
+from repo_root import ROOT
 
 from drake_tracker.cli.args import UsageError, scenario_name
 from drake_tracker.cli.main import main
@@ -13,26 +14,7 @@ from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.params.tracker_params import TrackerParams
 from drake_tracker.sim.scenario.load import ALL_SEQUENCES, BIAS_VARIANTS, list_presets
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-def run_cli(argv, capsys):
-    """(exit code, stdout, stderr) of ``drake-tracker ARGV`` run in this process."""
-    try:
-        code = main(argv)
-    except SystemExit as stop:
-        code = stop.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
-def assert_one_line_error(code, err, *fragments):
-    assert code == 2, err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, lines
-    for fragment in fragments:
-        assert fragment in lines[0], lines[0]
+EXAMPLES = ROOT / "examples"
 
 
 def test_unknown_scenario_is_one_line_and_writes_nothing(tmp_path, capsys):

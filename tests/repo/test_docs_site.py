@@ -12,12 +12,12 @@ import warnings
 from pathlib import Path
 
 import pytest
+from repo_root import ROOT
 
 import drake_tracker
 from drake_tracker.params.reference import field_comments, parameter_rows, unit_of
 from drake_tracker.params.tracker_params import TrackerParams
 
-ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 sys.path.insert(0, str(DOCS / "_ext"))
 from param_reference import parameters_markdown  # noqa: E402

@@ -7,7 +7,8 @@ never imports the package's upper layers."""
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from repo_root import ROOT
+
 PACKAGE = ROOT / "drake_tracker"
 MAX_LINES = 400
 

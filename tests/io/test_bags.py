@@ -4,7 +4,7 @@ The round trip: a run written as a ROS 2 MCAP bag and tracked from the bag gives
 same estimates as the run tracked directly (the estimates file, to 1e-9; here exactly).
 Bad input: each fault named, or skipped and counted. Bags written by rosbags' own
 writers for the other two formats (a ROS 1 bag, a ROS 2 sqlite3 folder) read the same.
-The truth's hand pose and ``/tf``: ``tests/test_bag_truth.py``.
+The truth's hand pose and ``/tf``: ``tests/io/test_bag_truth.py``.
 """
 
 from __future__ import annotations

@@ -253,7 +253,7 @@ def test_an_estimate_out_of_view_restarts_once_it_has_been_misplaced_long_enough
     """The encoders are -6 deg off on arm joints 2 and 4 (the image sees through 42 % of
     their arm): the out-of-view estimate stays until ``max_unconfirmed_s``. (Its
     100 deg shoulder bias is implausible: at the defaults the challenger belief restarts
-    it at the first image, ``tests/test_challenger.py``; off here, to see this rule.)"""
+    it at the first image, ``tests/robustness/test_challenger.py``; off here, to see this rule.)"""
     model, truth, frame = scene
     bias = np.zeros(len(model.robot_joint_names))
     bias[[model.robot_joint_names.index(n) for n in ("arm_joint_2", "arm_joint_4")]] = \

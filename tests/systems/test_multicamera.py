@@ -6,11 +6,11 @@ import logging
 
 import numpy as np
 import pytest
-from test_tracker import small_params
+from fast_params import seeded_params
+from two_cameras import CAMERA, POST, two_camera_config
 
 from drake_tracker.core.filter.estimate import estimate_from_belief
 from drake_tracker.core.render.kinematics import BatchedKinematics
-from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame
 from drake_tracker.io.recording import CameraImages, RecordedRun
 from drake_tracker.io.replay import replay_run
@@ -27,17 +27,6 @@ from drake_tracker.robot.model import (
 from drake_tracker.sim.scenario.checks import validate_scenario
 from drake_tracker.sim.scenario.load import load_scenario
 from drake_tracker.tracker import Tracker
-
-CAMERA = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
-POST = FrameOffset(parent="torso", xyz_m=[1.2, -1.45, 1.45], rpy_deg=[-114.44, 0.0, 38.29])
-
-
-def two_camera_config():
-    config = robot_preset("apollo")
-    config.added_frames = {"post_nominal": POST}
-    config.cameras = [CameraMount("camera", "camera_optical"),
-                      CameraMount("post", "post_nominal")]
-    return config
 
 
 @pytest.fixture(scope="module")
@@ -111,7 +100,7 @@ def test_an_image_moves_the_robot_and_its_own_camera_only(two_cameras):
     """Each camera's images sample its own six offset joints and the robot joints, but
     neither another camera's offset joints nor the joints that move another camera and
     not this one (the head's pan and tilt, for the camera on the post)."""
-    params = resolve_tracker_params(small_params(), two_cameras)
+    params = resolve_tracker_params(seeded_params(), two_cameras)
     head = joints_that_move(two_cameras, two_cameras.camera("camera").nominal_frame)
     assert {two_cameras.joint_names[k] for k in head} == {"head_pan", "head_tilt"}
     assert joints_that_move(two_cameras, two_cameras.camera("post").nominal_frame) == set()
@@ -130,15 +119,15 @@ def test_a_second_camera_without_images_gives_the_one_camera_estimate(apollo, tw
     offset staying at its prior;
     an image of the second camera that sees nothing changes nothing."""
     run = synthetic_run(apollo, duration_s=0.6, camera=CAMERA, seed=3)
-    one = replay_run(run, small_params(), apollo)
-    two = replay_run(run, small_params(), two_cameras)
+    one = replay_run(run, seeded_params(), apollo)
+    two = replay_run(run, seeded_params(), two_cameras)
     n = apollo.num_joints
     np.testing.assert_allclose(two.positions[:, :n], one.positions, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(two.X_CE, one.X_CE, rtol=1e-9, atol=1e-12)
     post = two_cameras.camera_joint_indices("post")
     sampled = np.isfinite(two.positions[:, 0])
     np.testing.assert_array_equal(two.positions[sampled][:, post], 0.0)
-    tracker = Tracker(two_cameras, params=small_params(), cameras={"camera": CAMERA,
+    tracker = Tracker(two_cameras, params=seeded_params(), cameras={"camera": CAMERA,
                                                                    "post": CAMERA})
     tracker.add_reading(0.0, np.zeros(len(two_cameras.robot_joint_names)))
     tracker.add_reading(0.05, np.zeros(len(two_cameras.robot_joint_names)))
@@ -158,10 +147,10 @@ def test_bad_cameras_name_the_problem(two_cameras, caplog):
     with pytest.raises(ValueError, match=r"cameras\[post\].frame.*post_nominal"):
         build_tracker_model(config)
     with pytest.raises(ValueError, match="unknown camera 'side'"):
-        Tracker(two_cameras, params=small_params(), cameras={"side": CAMERA})
+        Tracker(two_cameras, params=seeded_params(), cameras={"side": CAMERA})
     with pytest.raises(ValueError, match="one of the two"):
-        Tracker(two_cameras, CAMERA, small_params(), cameras={"camera": CAMERA})
-    tracker = Tracker(two_cameras, params=small_params(), cameras={"camera": CAMERA,
+        Tracker(two_cameras, CAMERA, seeded_params(), cameras={"camera": CAMERA})
+    tracker = Tracker(two_cameras, params=seeded_params(), cameras={"camera": CAMERA,
                                                                    "post": CAMERA})
     n = len(two_cameras.robot_joint_names)
     for k in range(30):
@@ -241,7 +230,7 @@ def test_an_image_of_one_of_several_cameras_that_shows_no_arm_is_not_applied(apo
     for label, model, cameras in (("several", build_tracker_model(config), {"camera": CAMERA,
                                                                             "up": CAMERA}),
                                   ("alone", build_tracker_model(alone), {"up": CAMERA})):
-        tracker = Tracker(model, params=small_params(), cameras=cameras)
+        tracker = Tracker(model, params=seeded_params(), cameras=cameras)
         n = len(model.robot_joint_names)
         for k in range(10):
             tracker.add_reading(0.01 * k, np.full(n, 0.1))
@@ -280,7 +269,7 @@ def test_the_estimate_gives_the_hand_in_every_cameras_frame_as_drake_computes_it
     """``TrackerEstimate.X_WC_by_camera`` and ``X_CkE`` at the estimate's positions equal
     Drake's ``CalcRelativeTransform`` there; the first camera's ``X_CkE`` is ``X_CE``."""
     model = two_cameras
-    tracker = Tracker(model, params=small_params(), cameras={"camera": CAMERA, "post": CAMERA})
+    tracker = Tracker(model, params=seeded_params(), cameras={"camera": CAMERA, "post": CAMERA})
     rng = np.random.default_rng(461)
     n = len(model.robot_joint_names)
     tracker.add_reading(0.0, rng.normal(0.0, 0.3, n))

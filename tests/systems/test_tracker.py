@@ -5,6 +5,7 @@ import logging
 
 import numpy as np
 import pytest
+from fast_params import seeded_params
 
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.filter.kalman import initial_moments
@@ -32,16 +33,8 @@ def arm6():
     return build_tracker_model(robot_preset("arm6"))
 
 
-def small_params(seed: int = 0) -> TrackerParams:
-    params = TrackerParams()
-    params.image.num_particles = 100
-    params.image.seed = seed
-    params.image.min_image_interval_s = 0.0
-    return params
-
-
 def test_bad_readings_are_rejected_by_name(apollo, caplog):
-    tracker = Tracker(apollo, CAMERA, small_params())
+    tracker = Tracker(apollo, CAMERA, seeded_params())
     n = len(apollo.robot_joint_names)
     with pytest.raises(ValueError, match="shape"):
         tracker.add_reading(0.0, np.zeros(n + 1))
@@ -61,7 +54,7 @@ def test_bad_readings_are_rejected_by_name(apollo, caplog):
 
 
 def test_bad_images_are_rejected(apollo):
-    tracker = Tracker(apollo, CAMERA, small_params())
+    tracker = Tracker(apollo, CAMERA, seeded_params())
     tracker.add_reading(0.0, np.zeros(len(apollo.robot_joint_names)))
     with pytest.raises(ValueError, match="shape"):
         tracker.add_image(DepthFrame(0.0, 0.0, np.ones((60, 81), np.float32), 0))
@@ -72,7 +65,7 @@ def test_bad_images_are_rejected(apollo):
 
 
 def test_future_and_too_old_images_are_skipped_with_warning(apollo, caplog):
-    tracker = Tracker(apollo, CAMERA, small_params())
+    tracker = Tracker(apollo, CAMERA, seeded_params())
     n = len(apollo.robot_joint_names)
     for k in range(30):
         tracker.add_reading(0.1 * k, np.zeros(n))
@@ -86,7 +79,7 @@ def test_future_and_too_old_images_are_skipped_with_warning(apollo, caplog):
 
 
 def test_all_nan_image_changes_nothing(apollo):
-    tracker = Tracker(apollo, CAMERA, small_params())
+    tracker = Tracker(apollo, CAMERA, seeded_params())
     n = len(apollo.robot_joint_names)
     tracker.add_reading(0.0, np.zeros(n))
     tracker.add_reading(0.05, np.zeros(n))
@@ -178,7 +171,7 @@ def test_fusion_beats_encoders_only_on_synthetic_runs_over_seeds(apollo):
     ratios = []
     for seed in range(3):
         run = synthetic_run(apollo, duration_s=2.0, bias_rad=np.radians(3.0), seed=seed)
-        result = replay_run(run, small_params(seed), apollo)
+        result = replay_run(run, seeded_params(seed), apollo)
         report = run_report(run, {"encoders_only": encoders_only_X_CE(run, apollo),
                                   "full_fusion": result.X_CE})
         encoders = report["methods"]["encoders_only"]["translation_mm"]["p50"]
@@ -190,7 +183,7 @@ def test_fusion_beats_encoders_only_on_synthetic_runs_over_seeds(apollo):
 
 def test_second_robot_tracks(arm6):
     run = synthetic_run(arm6, duration_s=1.5, bias_rad=np.radians(3.0), seed=0)
-    result = replay_run(run, small_params(), arm6)
+    result = replay_run(run, seeded_params(), arm6)
     report = run_report(run, {"encoders_only": encoders_only_X_CE(run, arm6),
                               "full_fusion": result.X_CE})
     assert (report["methods"]["full_fusion"]["translation_mm"]["p50"]

@@ -18,9 +18,9 @@ import pytest
 pytest.importorskip("lcm")
 
 import lcm  # noqa: E402
+from cli_runs import assert_one_line_error, run_cli  # noqa: E402
 from drake import lcmt_image, lcmt_panda_status  # noqa: E402
 from fast_params import small_params  # noqa: E402
-from test_cli import assert_one_line_error, run_cli  # noqa: E402
 
 from drake_tracker.io.estimates_out import read_estimates_csv, stamp_text  # noqa: E402
 from drake_tracker.io.lcm_log import LcmLogSource  # noqa: E402

@@ -15,7 +15,7 @@ pytest.importorskip("rosbags")
 
 from pydrake.common.eigen_geometry import Quaternion  # noqa: E402
 from pydrake.math import RigidTransform  # noqa: E402
-from test_multicamera import two_camera_config  # noqa: E402
+from two_cameras import two_camera_config  # noqa: E402
 
 from drake_tracker.core.filter.estimate import (  # noqa: E402
     PoseReadout,

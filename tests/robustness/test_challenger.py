@@ -166,7 +166,7 @@ def test_a_challenger_rests_as_long_as_it_searched(scene):  # noqa: F811
 
 
 def test_an_estimate_out_of_view_is_challenged_at_the_first_image(apollo_out_of_view):
-    """The restart's own scene (``tests/test_restart.py``): 100 deg of shoulder bias put
+    """The restart's own scene (``tests/robustness/test_restart.py``): 100 deg of shoulder bias put
     the estimate's arm out of view; the misplaced-restart rule waits a second, the
     challenger does not (the bias is implausible), and brings the hand back near the
     encoders' at once (one image from there is not an acquisition, as in the restart's

@@ -1,6 +1,6 @@
 """The tracker's Drake systems: each through its ports, Contexts copied and simulated
 again, the image update on the worker thread (the whole Diagram against the offline
-tracker: ``tests/test_offline_equals_diagram.py``)."""
+tracker: ``tests/systems/test_offline_equals_diagram.py``)."""
 
 import numpy as np
 import pytest
