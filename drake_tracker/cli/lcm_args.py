@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 from drake_tracker.cli.args import UsageError, check_params_for_model
 
 if TYPE_CHECKING:
+    from drake_tracker.core.sensors.camera import CameraIntrinsics
+    from drake_tracker.io.lcm_log import LcmCamera
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
 
@@ -18,17 +20,62 @@ LCM_TRACK_FLAGS = ("camera", "status_channel", "image_channel", "status_type")
 def add_lcm_track_arguments(p: argparse.ArgumentParser) -> None:
     """Adds ``track``'s ``--camera``, ``--status-channel``, ``--image-channel`` and
     ``--status-type``."""
-    p.add_argument("--camera", default=None, metavar="WxH:fx,fy,cx,cy",
+    p.add_argument("--camera", default=None, action="append",
+                   metavar="[NAME=]WxH:fx,fy,cx,cy",
                    help="with --lcm-log: the depth camera's intrinsics in pixels, e.g. "
                         "640x480:615.0,615.0,319.5,239.5 (an lcmt_image carries none; "
-                        "'record --lcm-log' prints its camera in this form)")
+                        "'record --lcm-log' prints its camera in this form); repeated as "
+                        "NAME=WxH:..., several depth cameras, each the model's camera NAME "
+                        "(RobotConfig.cameras), its images on DRAKE_RGBD_CAMERA_IMAGES_NAME")
     p.add_argument("--status-channel", default=None, help="with --lcm-log: the status "
                    "channel (default: IIWA_STATUS or PANDA_STATUS, whichever the log has)")
-    p.add_argument("--image-channel", default=None, help="with --lcm-log: the "
-                   "lcmt_image_array channel (default: DRAKE_RGBD_CAMERA_IMAGES)")
+    p.add_argument("--image-channel", default=None, action="append",
+                   metavar="[NAME=]CHANNEL",
+                   help="with --lcm-log: the lcmt_image_array channel (default: "
+                        "DRAKE_RGBD_CAMERA_IMAGES); as NAME=CHANNEL, camera NAME's "
+                        "(default: DRAKE_RGBD_CAMERA_IMAGES_NAME)")
     p.add_argument("--status-type", default=None, choices=("auto", "iiwa", "panda"),
                    help="with --lcm-log: the status message type (default: auto, by the "
                         "messages' fingerprint)")
+
+
+def lcm_cameras(cameras: list[str], channels: list[str] | None
+                ) -> tuple[CameraIntrinsics, str] | list[LcmCamera]:
+    """The cameras of ``--camera`` and ``--image-channel``: one camera (``WxH:...``,
+    each flag at most once) as (intrinsics, channel), or several (``NAME=WxH:...``, a
+    channel for a named camera only) as ``LcmCamera``s. ValueError naming what is
+    wrong."""
+    from drake_tracker.io.lcm_log import LcmCamera
+    from drake_tracker.io.lcm_messages import (
+        DRAKE_RGBD_CAMERA_IMAGES,
+        camera_channel,
+        camera_from_text,
+    )
+
+    channels = channels or []
+    named = [v for v in cameras + channels if "=" in v]
+    if not named:
+        if len(cameras) > 1 or len(channels) > 1:
+            raise ValueError("several --camera or --image-channel: name each camera, "
+                             "--camera NAME=WxH:fx,fy,cx,cy (RobotConfig.cameras)")
+        return (camera_from_text(cameras[0]),
+                channels[0] if channels else DRAKE_RGBD_CAMERA_IMAGES)
+    if len(named) != len(cameras) + len(channels):
+        raise ValueError("--camera and --image-channel are either all unnamed (one camera) "
+                         "or all NAME=... (several)")
+    pairs = [v.split("=", 1) for v in cameras]
+    given = dict(v.split("=", 1) for v in channels)
+    unknown = sorted(set(given) - {name for name, _ in pairs})
+    if unknown:
+        raise ValueError(f"--image-channel {unknown[0]}=...: no --camera {unknown[0]}=WxH:...")
+    found = []
+    for name, text in pairs:
+        try:
+            intrinsics = camera_from_text(text)
+        except ValueError as err:
+            raise ValueError(f"camera '{name}': {err}") from None
+        found.append(LcmCamera(name, given.get(name, camera_channel(name)), intrinsics))
+    return found
 
 
 def check_lcm_flags(args: argparse.Namespace) -> None:
@@ -38,35 +85,41 @@ def check_lcm_flags(args: argparse.Namespace) -> None:
     if args.lcm_log is None and given:
         raise UsageError(f"{', '.join(given)}: only with --lcm-log")
     if args.lcm_log is not None and args.camera is None:
-        raise UsageError("--lcm-log needs --camera WIDTHxHEIGHT:fx,fy,cx,cy: an LCM depth "
-                         "image does not carry its intrinsics")
+        raise UsageError("--lcm-log needs --camera WIDTHxHEIGHT:fx,fy,cx,cy (NAME=... for "
+                         "each of several cameras): an LCM depth image does not carry its "
+                         "intrinsics")
 
 
 def track_lcm_log_command(args: argparse.Namespace, params: TrackerParams,
                           model: TrackerModel) -> int:
     """``drake-tracker track --lcm-log FILE --robot ROBOT.yaml --camera ...``: the log
     through ``io/track_files.track_lcm_log``; every fault a one-line UsageError."""
-    from drake_tracker.io.lcm_messages import DRAKE_RGBD_CAMERA_IMAGES, camera_from_text
-
     try:
-        camera = camera_from_text(args.camera)
+        cameras = lcm_cameras(args.camera, args.image_channel)
     except ValueError as err:
-        raise UsageError(f"--camera: {err}") from None
+        raise UsageError(f"--camera: {err}" if "WIDTHxHEIGHT" in str(err) else str(err)
+                         ) from None
     if args.params:
         check_params_for_model(params, model, f"parameter file '{args.params}'")
     try:
-        from drake_tracker.io.lcm_log import LcmLogSource
+        from drake_tracker.io.lcm_log import LcmLogSource, check_lcm_cameras
         from drake_tracker.io.track_files import print_report, track_lcm_log
 
-        source = LcmLogSource(args.lcm_log, model.robot_joint_names, camera,
-                              args.status_channel,
-                              args.image_channel or DRAKE_RGBD_CAMERA_IMAGES,
-                              args.status_type or "auto")
+        if isinstance(cameras, list):
+            check_lcm_cameras(cameras, model.camera_names)
+            source = LcmLogSource(args.lcm_log, model.robot_joint_names, cameras,
+                                  args.status_channel, status_type=args.status_type or "auto")
+        else:
+            source = LcmLogSource(args.lcm_log, model.robot_joint_names, cameras[0],
+                                  args.status_channel, cameras[1],
+                                  args.status_type or "auto")
         report = track_lcm_log(source, model, params, args.out)
     except (ImportError, ValueError) as err:
         raise UsageError(" ".join(str(err).split())) from None
+    images = ", ".join(c.channel if c.name is None else f"{c.channel} ({c.name})"
+                       for c in source.cameras)
     print(f"{args.lcm_log}: {source.status_channel} (lcmt_{source.status_type}_status), "
-          f"{source.image_channel} (lcmt_image_array)")
+          f"{images} (lcmt_image_array)")
     print_report(report)
     if args.out:
         print(f"wrote {args.out}/: " + ", ".join(report["files"] + ["report.json"]))

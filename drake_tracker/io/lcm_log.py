@@ -7,6 +7,10 @@ extra) and decoded with Drake's own message classes (``io/lcm_messages.py``).
   depth on ``image_channel`` (default ``DRAKE_RGBD_CAMERA_IMAGES``), an
   ``lcmt_image_array``. A channel the log lacks is an error listing the channels it has.
   Other channels are ignored.
+* Several depth cameras (a sequence of :class:`LcmCamera`): each the model's camera by
+  name, with its own channel (Drake's ``ApplyCameraConfig`` publishes camera NAME on
+  ``DRAKE_RGBD_CAMERA_IMAGES_NAME``) and intrinsics; its images are named by it
+  (``ImageEvent.camera``) and numbered on their own.
 * Joints: a status message has no joint names, so its positions are taken in the
   model's ``robot_joint_names`` order, and their number must be the model's: an error
   at the first message, a skipped and counted message later on.
@@ -14,7 +18,7 @@ extra) and decoded with Drake's own message classes (``io/lcm_messages.py``).
   resolution of the given intrinsics (an ``lcmt_image`` has none: see
   ``camera_from_text``). Anything else is skipped and counted, by reason.
 * Times: each message's ``utime`` (a status's, an image's ``header.utime``: the
-  capture), relative to the earliest first stamp of the two channels, in integer
+  capture), relative to the earliest first stamp of the channels, in integer
   microseconds until then, then the nearest float to their count over 1e6. An image's
   arrival is its log time when that is on the stamps' clock (``io/stream.py:logged_arrival``).
 * The log is checked as it is read: ``lcm.EventLog`` stops at an event that is cut
@@ -26,7 +30,8 @@ extra) and decoded with Drake's own message classes (``io/lcm_messages.py``).
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -90,26 +95,65 @@ def read_log(path: str | Path) -> Iterator[Any]:
         log.close()
 
 
+@dataclass(frozen=True)
+class LcmCamera:
+    """One depth camera of an LCM log: the model's camera ``name``, the
+    ``lcmt_image_array`` ``channel`` of its images (e.g. ``camera_channel(name)``) and its
+    ``intrinsics`` (an ``lcmt_image`` carries none)."""
+
+    name: str | None
+    channel: str
+    intrinsics: CameraIntrinsics
+
+
+def check_lcm_cameras(cameras: Sequence[LcmCamera],
+                      model_cameras: list[str] | None = None) -> None:
+    """ValueError for no camera, a camera the model does not have (with
+    ``model_cameras``, its camera names), two cameras of one name, or one channel for
+    two cameras."""
+    if not cameras:
+        raise ValueError("no depth camera: give at least one")
+    names = [c.name for c in cameras]
+    for name in names:
+        if model_cameras is not None and name not in model_cameras:
+            raise ValueError(f"unknown camera '{name}': the model's cameras are "
+                             f"{model_cameras} (RobotConfig.cameras)")
+        if names.count(name) > 1:
+            raise ValueError(f"two cameras are named '{name}': give each camera once")
+    channels = [c.channel for c in cameras]
+    twice = [c for c in channels if channels.count(c) > 1]
+    if twice:
+        raise ValueError(f"image channel {twice[0]} is given for two cameras")
+
+
 class LcmLogSource:
     """The events of an LCM log (``io/stream.py``) for a model's robot joints.
 
     Args:
         path: the ``lcm-logger`` file.
         joint_names: the model's robot joints, in its order (the status's order).
-        intrinsics: the depth camera's (an ``lcmt_image`` carries none).
+        camera: the depth camera's intrinsics (one camera, on ``image_channel``; an
+            ``lcmt_image`` carries none), or several cameras, each an
+            :class:`LcmCamera` with its own channel.
         status_channel: the status channel (None: ``IIWA_STATUS`` or ``PANDA_STATUS``,
             whichever the log holds).
-        image_channel: the ``lcmt_image_array`` channel.
+        image_channel: the one camera's ``lcmt_image_array`` channel.
         status_type: ``"iiwa"``, ``"panda"`` or ``"auto"`` (by fingerprint).
     """
 
-    def __init__(self, path: str | Path, joint_names: list[str], intrinsics: CameraIntrinsics,
+    def __init__(self, path: str | Path, joint_names: list[str],
+                 camera: CameraIntrinsics | Sequence[LcmCamera],
                  status_channel: str | None = None,
                  image_channel: str = DRAKE_RGBD_CAMERA_IMAGES,
                  status_type: str = "auto") -> None:
         self.path = Path(path)
         self.joint_names = list(joint_names)
-        self.intrinsics = intrinsics
+        if isinstance(camera, CameraIntrinsics):
+            #: The cameras read (one camera: named None, as a recorded run's first).
+            self.cameras: tuple[LcmCamera, ...] = (LcmCamera(None, image_channel, camera),)
+        else:
+            self.cameras = tuple(camera)
+            check_lcm_cameras(self.cameras)
         if status_type not in ("auto", *STATUS_TYPES):
             raise ValueError(f"status type '{status_type}' is not one of "
                              f"{['auto', *STATUS_TYPES]}")
@@ -127,11 +171,12 @@ class LcmLogSource:
                                  f"(--status-channel); its channels: {present}")
             status_channel = known[0]
         for channel, flag in ((status_channel, "--status-channel"),
-                              (image_channel, "--image-channel")):
+                              *((c.channel, "--image-channel") for c in self.cameras)):
             if channel not in counts:
                 raise ValueError(f"LCM log {self.path} has no channel '{channel}' ({flag}); "
                                  f"its channels (messages): {present}")
-        self.status_channel, self.image_channel = status_channel, image_channel
+        self.status_channel = status_channel
+        self._by_channel = {c.channel: c for c in self.cameras}
         data = first[status_channel].data
         found = status_type_of(data)
         if found is None or status_type not in ("auto", found):
@@ -152,22 +197,39 @@ class LcmLogSource:
                              f"{len(self.joint_names)} robot joints ({self.joint_names}); "
                              f"the status has no joint names, so the counts must match")
         stamps = [utime]
-        try:
-            first_image = decode(lcmt_image_array, first[image_channel].data)
-            stamps.append(depth_from_image_array(first_image)[0])
-        except ValueError:
-            pass  # the first image is skipped and counted by events()
+        for c in self.cameras:
+            try:
+                first_image = decode(lcmt_image_array, first[c.channel].data)
+                stamps.append(depth_from_image_array(first_image)[0])
+            except ValueError:
+                pass  # the first image is skipped and counted by events()
         #: The time base (integer µs): the first status or depth message's stamp.
         self.base_us = min(stamps)
         #: The time base in integer ns (the estimates files' stamps).
         self.base_ns = self.base_us * 1000
-        self.num_images = counts[image_channel]
+        self.num_images = sum(counts[c.channel] for c in self.cameras)
+
+    @property
+    def image_channel(self) -> str:
+        """The first camera's image channel (the only one's, for one camera)."""
+        return self.cameras[0].channel
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        """The first camera's intrinsics (the only one's, for one camera)."""
+        return self.cameras[0].intrinsics
+
+    def camera_models(self) -> CameraIntrinsics | dict[str, CameraIntrinsics]:
+        """The one camera's intrinsics, or several cameras' by name
+        (``Tracker(cameras=...)``)."""
+        if self.cameras[0].name is None:
+            return self.intrinsics
+        return {c.name: c.intrinsics for c in self.cameras}
 
     def events(self) -> Iterator[Event]:
         """The readings and depth images in the log's order (see the module)."""
-        sequence = 0
+        sequence = {c.channel: 0 for c in self.cameras}
         n = len(self.joint_names)
-        size = (self.intrinsics.height, self.intrinsics.width)
         for event in read_log(self.path):
             if event.channel == self.status_channel:
                 if status_type_of(event.data) != self.status_type:
@@ -188,23 +250,26 @@ class LcmLogSource:
                                          f"joints, the model has {n}")
                     continue
                 yield ReadingEvent(t, positions)
-            elif event.channel == self.image_channel:
+            elif event.channel in self._by_channel:
+                camera = self._by_channel[event.channel]
                 try:
                     utime, depth = depth_from_image_array(decode(lcmt_image_array, event.data))
                 except ValueError as err:
-                    yield SkippedMessage("depth images not usable", f"image array logged at "
-                                         f"{event.timestamp} µs skipped: {err}")
+                    yield SkippedMessage("depth images not usable", f"image array on "
+                                         f"{event.channel} logged at {event.timestamp} µs "
+                                         f"skipped: {err}")
                     continue
                 t = (utime - self.base_us) / 10**6
+                size = (camera.intrinsics.height, camera.intrinsics.width)
                 if depth.shape != size:
-                    yield SkippedMessage("depth images of another size", f"depth image at "
-                                         f"{t:.6f} s skipped: {depth.shape[1]}x"
-                                         f"{depth.shape[0]}, the camera is {size[1]}x"
-                                         f"{size[0]}")
+                    yield SkippedMessage("depth images of another size", f"depth image on "
+                                         f"{event.channel} at {t:.6f} s skipped: "
+                                         f"{depth.shape[1]}x{depth.shape[0]}, the camera is "
+                                         f"{size[1]}x{size[0]}")
                     continue
                 arrival = logged_arrival(t, (int(event.timestamp) - self.base_us) / 10**6)
-                yield ImageEvent(t, depth, sequence, arrival)
-                sequence += 1
+                yield ImageEvent(t, depth, sequence[event.channel], arrival, camera.name)
+                sequence[event.channel] += 1
 
     def close(self) -> None:
         """Nothing to close: each pass opens the log anew (for the ``BagSource`` API)."""

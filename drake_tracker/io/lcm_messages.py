@@ -161,6 +161,13 @@ def depth_from_image(image: lcmt_image) -> np.ndarray:
     return np.ascontiguousarray(rows).view(dtype).reshape(h, w).astype(dtype.newbyteorder("="))
 
 
+def camera_channel(name: str) -> str:
+    """The ``lcmt_image_array`` channel of camera ``name`` where there are several:
+    ``DRAKE_RGBD_CAMERA_IMAGES_<name>``, the channel Drake's ``ApplyCameraConfig``
+    publishes a named camera's images on."""
+    return f"{DRAKE_RGBD_CAMERA_IMAGES}_{name}"
+
+
 def camera_from_text(text: str) -> CameraIntrinsics:
     """The intrinsics written ``WIDTHxHEIGHT:fx,fy,cx,cy``. Raises ValueError showing the
     expected form."""

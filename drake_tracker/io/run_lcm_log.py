@@ -5,8 +5,10 @@ Channels (Drake's default names): ``IIWA_STATUS``, an ``lcmt_iiwa_status`` per r
 (``num_joints`` = the run's joints, whatever their number; the readings in
 ``joint_position_measured``, the other arrays zero), and ``DRAKE_RGBD_CAMERA_IMAGES``, an
 ``lcmt_image_array`` per image holding one depth ``lcmt_image`` (float32 metres, NaN: no
-return; or uint16 millimetres, 0: no return; raw or zlib). Stamps are integer
-microseconds: the run's times plus ``base_us``, rounded (write a
+return; or uint16 millimetres, 0: no return; raw or zlib). A run of several cameras
+writes each camera's images on ``DRAKE_RGBD_CAMERA_IMAGES_<name>``, the first camera's
+too, as Drake's ``ApplyCameraConfig`` publishes named cameras (:func:`image_channels`).
+Stamps are integer microseconds: the run's times plus ``base_us``, rounded (write a
 ``run.stamped_in_microseconds()`` to read its times back exactly). A reading is logged
 at its stamp; an image at its arrival, with its capture time in ``header.utime``. The
 truth is not written (LCM has no message for it); the camera's intrinsics neither (an
@@ -26,6 +28,7 @@ import numpy as np
 from drake_tracker.io.lcm_messages import (
     DRAKE_RGBD_CAMERA_IMAGES,
     IIWA_STATUS,
+    camera_channel,
     depth_image_message,
     image_array_message,
     require_lcm,
@@ -86,15 +89,29 @@ def run_messages(run: RecordedRun, base_us: int = DEFAULT_BASE_US,
             stamp = _us(base_us, t)
             yield stamp, 0, IIWA_STATUS, lambda s=stamp, q=q: status_message(s, q)
 
-    def images():
-        order, _ = run.images_in_arrival_order()
-        for i in order:
-            stamp = _us(base_us, run.image_capture_times_s[i])
-            depth = np.asarray(run.depth_images_m[i], np.float32)
-            yield _us(base_us, run.image_arrival_times_s[i]), 1, DRAKE_RGBD_CAMERA_IMAGES, (
+    def images(channel, capture_s, arrival_s, depth_images):
+        arrivals = np.asarray(arrival_s, float)
+        order = np.argsort(arrivals, kind="stable")
+        for i in order[np.isfinite(arrivals[order])]:
+            stamp = _us(base_us, capture_s[i])
+            depth = np.asarray(depth_images[i], np.float32)
+            yield _us(base_us, arrivals[i]), 1, channel, (
                 lambda s=stamp, d=depth: image_array_message(s, [depth_image_message(
                     s, d if depth_type == "float32" else millimetres(d), compress)]))
 
-    for log_us, _, channel, build in heapq.merge(readings(), images(),
+    channels = image_channels(run)
+    cameras = [images(channels[run.camera_name], run.image_capture_times_s,
+                      run.image_arrival_times_s, run.depth_images_m)]
+    cameras += [images(channels[c.name], c.capture_times_s, c.arrival_times_s,
+                       c.depth_images_m) for c in run.other_cameras]
+    for log_us, _, channel, build in heapq.merge(readings(), *cameras,
                                                  key=lambda e: (e[0], e[1])):
         yield log_us, channel, build()
+
+
+def image_channels(run: RecordedRun) -> dict[str, str]:
+    """Each camera's ``lcmt_image_array`` channel by name: ``DRAKE_RGBD_CAMERA_IMAGES``
+    for a run of one camera, ``DRAKE_RGBD_CAMERA_IMAGES_<name>`` for each of several."""
+    if not run.other_cameras:
+        return {run.camera_name: DRAKE_RGBD_CAMERA_IMAGES}
+    return {name: camera_channel(name) for name in run.camera_names}

@@ -177,12 +177,7 @@ def track_bag(source: BagSource, model: TrackerModel, params: TrackerParams | No
     and each camera's frame id in the bag is its parent on ``estimates.mcap``'s
     ``/tf``."""
     truth = source.truth_X_CE()
-    fed = {c.name or model.camera_names[0] for c in source.cameras}
-    unfed = [name for name in model.camera_names if name not in fed]
-    if unfed:
-        log.warning("the robot's camera(s) %s have no --depth-topic NAME=TOPIC: they get no "
-                    "image, and the hand in their frame rests on the other cameras and the "
-                    "encoders", unfed)
+    warn_unfed_cameras(model, [c.name for c in source.cameras], "--depth-topic NAME=TOPIC")
     try:
         return track_to_folder(
             source.events(), model, source.camera_models(), params, out_dir, source.base_ns,
@@ -215,10 +210,23 @@ def track_lcm_log(source: LcmLogSource, model: TrackerModel, params: TrackerPara
                   out_dir: str | Path | None, progress: bool = True) -> dict:
     """Tracks an ``io/lcm_log.LcmLogSource`` into ``out_dir`` (see
     :func:`track_to_folder`); an LCM log has no truth, so no error percentiles."""
+    warn_unfed_cameras(model, [c.name for c in source.cameras], "--camera NAME=WxH:...")
+    channels = ({"image_channels": {c.name: c.channel for c in source.cameras}}
+                if source.cameras[0].name is not None else
+                {"image_channel": source.image_channel})
     return track_to_folder(
-        source.events(), model, source.intrinsics, params, out_dir, source.base_ns,
+        source.events(), model, source.camera_models(), params, out_dir, source.base_ns,
         total_images=source.num_images,
         source={"lcm_log": str(source.path), "status_channel": source.status_channel,
-                "status_type": f"lcmt_{source.status_type}_status",
-                "image_channel": source.image_channel},
+                "status_type": f"lcmt_{source.status_type}_status", **channels},
         progress=progress)
+
+
+def warn_unfed_cameras(model: TrackerModel, fed: list[str | None], flag: str) -> None:
+    """Warns of the model's cameras that no input camera feeds (``fed``: the input's
+    camera names, None: the model's first camera)."""
+    named = {name or model.camera_names[0] for name in fed}
+    unfed = [name for name in model.camera_names if name not in named]
+    if unfed:
+        log.warning("the robot's camera(s) %s have no %s: they get no image, and the hand "
+                    "in their frame rests on the other cameras and the encoders", unfed, flag)

@@ -233,11 +233,20 @@ def run_record(args: argparse.Namespace) -> int:
         from drake_tracker.io.run_lcm_log import write_run_lcm_log
 
         count = write_run_lcm_log(run, lcm_log)
-        written.append(f"{lcm_log} ({count} messages; track it with --camera "
-                       f"{camera_text(run.camera_intrinsics)})")
-    print(f"recorded '{scenario.name}': {len(run.reading_times_s)} readings, "
-          f"{len(run.image_capture_times_s)} images "
-          f"({run.camera_intrinsics.width}x{run.camera_intrinsics.height}), "
+        flags = (f"--camera {camera_text(run.camera_intrinsics)}" if not run.other_cameras
+                 else " ".join(f"--camera {name}={camera_text(camera)}"
+                               for name, camera in run.intrinsics_by_camera.items()))
+        written.append(f"{lcm_log} ({count} messages; track it with {flags})")
+    counts = [len(run.image_capture_times_s)] + [len(c.capture_times_s)
+                                                 for c in run.other_cameras]
+    images = ", ".join(f"{k} from {name} ({c.width}x{c.height})" for k, (name, c) in
+                       zip(counts, run.intrinsics_by_camera.items()))
+    if not run.other_cameras:
+        c = run.camera_intrinsics
+        images = f"{counts[0]} images ({c.width}x{c.height})"
+    else:
+        images = f"{sum(counts)} images: {images}"
+    print(f"recorded '{scenario.name}': {len(run.reading_times_s)} readings, {images}, "
           f"{len(run.truth_times_s)} truth samples, {run.extra['wall_time_s']:.1f} s -> "
           f"{', '.join(written)}")
     return 0

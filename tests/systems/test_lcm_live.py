@@ -118,3 +118,57 @@ def test_the_lcm_diagram_gives_the_offline_estimates(apollo):
     q = X_CE.rotation().ToQuaternion()
     np.testing.assert_array_equal(message.quaternion[0],
                                   np.float32([q.w(), q.x(), q.y(), q.z()]).astype(float))
+
+
+def test_two_cameras_on_their_own_channels_give_the_offline_estimates():
+    """A two-camera run published as Drake publishes named cameras (each on
+    ``DRAKE_RGBD_CAMERA_IMAGES_<name>``) into the example's Diagram of several cameras
+    (``AddTracker(cameras=...)``): the offline tracker's estimates wherever no image is
+    in flight (a frame that comes at the check of the other camera's is taken one check
+    later, as in ``test_offline_equals_diagram``), and every image applied."""
+    from offline_vs_diagram import feed_cameras
+
+    from drake_tracker.io.replay import model_for_run
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario.load import load_scenario
+
+    run = simulate_and_record(load_scenario("occlusion-lasting-2cam/constant"),
+                              duration_s=1.0).stamped_in_microseconds()
+    model = model_for_run(run)
+    h = float(np.median(np.diff(run.reading_times_s)))
+    times = run.reading_times_s + 0.6 * h
+    p = small_params()
+    p.image.seed = 5
+    offline, applied = feed_cameras(Tracker(model, params=p, cameras=run.intrinsics_by_camera),
+                                    run, times)
+    assert min(applied.values()) > 5
+
+    bus, pose_bus = DrakeLcm("memq://"), DrakeLcm("memq://")
+    live = load_example("lcm_live.py").build(bus, model, run.intrinsics_by_camera, h, p,
+                                             pose_lcm=pose_bus)
+    assert list(live.images_by_camera) == run.camera_names
+    simulator = Simulator(live.diagram)
+    context = simulator.get_mutable_context()
+    bank_context = live.tracker.kalman_bank.GetMyContextFromRoot(context)
+    messages = list(run_messages(run, base_us=0))
+    assert {m[1] for m in messages} == {"IIWA_STATUS", "DRAKE_RGBD_CAMERA_IMAGES_camera",
+                                        "DRAKE_RGBD_CAMERA_IMAGES_post_camera"}
+    diagram, i = [], 0
+    for t in times:
+        while i < len(messages) and messages[i][0] / 1e6 <= t:
+            log_us, channel, data = messages[i]
+            simulator.AdvanceTo(log_us / 1e6)
+            bus.Publish(channel, data)
+            i += 1
+        simulator.AdvanceTo(t)
+        diagram.append(live.tracker.estimated_position.Eval(bank_context).copy())
+    assert i == len(messages)
+    cpf = live.tracker.image_update
+    state = cpf.state(cpf.GetMyContextFromRoot(context))
+    assert state.images_applied + (state.in_flight is not None) == sum(applied.values())
+    assert all(a.skipped == {} for a in live.images_by_camera.values())
+    first = next(k for k, e in enumerate(offline) if e is not None)
+    arrivals = np.concatenate([run.image_arrival_times_s] + [
+        c.arrival_times_s for c in run.other_cameras])
+    assert_same_when_settled(run, diagram, [None if e is None else e.positions
+                                            for e in offline], first, 2 * h, h, arrivals)

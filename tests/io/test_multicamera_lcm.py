@@ -1,0 +1,155 @@
+"""LCM logs of several depth cameras (issue 46): ``record --lcm-log`` writes each camera's
+images on its own channel, ``DRAKE_RGBD_CAMERA_IMAGES_<name>`` as Drake's
+``ApplyCameraConfig`` publishes them; ``track --lcm-log`` takes each as a camera of the
+model (``--camera NAME=WxH:...``), and the round trip gives the estimates of
+``track --run`` on the same run, bit for bit. Bad camera flags are one-line errors."""
+
+import json
+import logging
+from collections import Counter
+
+import numpy as np
+import pytest
+
+pytest.importorskip("lcm")
+
+from cli_runs import assert_one_line_error, run_cli  # noqa: E402
+from fast_params import small_params  # noqa: E402
+
+from drake_tracker.io.estimates_out import read_estimates_csv  # noqa: E402
+from drake_tracker.io.lcm_log import LcmCamera, LcmLogSource, read_log  # noqa: E402
+from drake_tracker.io.lcm_messages import camera_channel, camera_text  # noqa: E402
+from drake_tracker.io.replay import model_for_run  # noqa: E402
+from drake_tracker.io.run_lcm_log import image_channels, write_run_lcm_log  # noqa: E402
+from drake_tracker.params.loading import tracker_params_to_yaml  # noqa: E402
+
+CAMERAS = ("camera", "post_camera")
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """1.5 s of a two-camera preset, stamped in µs, as a run, an LCM log, a robot file
+    and the test's parameters."""
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario.load import load_scenario
+
+    folder = tmp_path_factory.mktemp("two_cameras_lcm")
+    run = simulate_and_record(load_scenario("occlusion-lasting-2cam/constant"),
+                              duration_s=1.5).stamped_in_microseconds()
+    run.save(folder / "run.npz")
+    write_run_lcm_log(run, folder / "run.lcmlog")
+    (folder / "robot.yaml").write_text(run.robot_config_yaml)
+    (folder / "params.yaml").write_text(tracker_params_to_yaml(small_params()))
+    return run, folder
+
+
+def _camera_flags(run, names=CAMERAS):
+    flags = []
+    for name in names:
+        flags += ["--camera", f"{name}={camera_text(run.intrinsics_by_camera[name])}"]
+    return flags
+
+
+def test_each_camera_has_its_own_channel(recorded):
+    run, folder = recorded
+    assert run.camera_names == list(CAMERAS)
+    channels = image_channels(run)
+    assert channels == {name: f"DRAKE_RGBD_CAMERA_IMAGES_{name}" for name in CAMERAS}
+    counts = Counter(event.channel for event in read_log(folder / "run.lcmlog"))
+    assert counts == {"IIWA_STATUS": len(run.reading_times_s),
+                      channels["camera"]: len(run.image_capture_times_s),
+                      channels["post_camera"]: len(run.other_cameras[0].capture_times_s)}
+    model = model_for_run(run)
+    source = LcmLogSource(folder / "run.lcmlog", model.robot_joint_names, [
+        LcmCamera(name, camera_channel(name), run.intrinsics_by_camera[name])
+        for name in CAMERAS])
+    assert source.camera_models() == run.intrinsics_by_camera
+    assert source.num_images == counts[channels["camera"]] + counts[channels["post_camera"]]
+    images = [e for e in source.events() if hasattr(e, "depth")]
+    t0 = run.reading_times_s[0]  # the log's time base: its first stamp
+    for name, capture, arrival, depth in (
+            ("camera", run.image_capture_times_s, run.image_arrival_times_s,
+             run.depth_images_m),
+            ("post_camera", run.other_cameras[0].capture_times_s,
+             run.other_cameras[0].arrival_times_s, run.other_cameras[0].depth_images_m)):
+        mine = [e for e in images if e.camera == name]
+        order = np.argsort(arrival, kind="stable")
+        assert [e.sequence for e in mine] == list(range(len(capture)))
+        np.testing.assert_allclose([e.capture_s for e in mine], capture[order] - t0,
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose([e.arrival_s for e in mine], arrival[order] - t0,
+                                   rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(np.stack([e.depth for e in mine]),
+                                      depth[order].astype(np.float32))
+
+
+def test_round_trip_gives_the_same_estimates(recorded, capsys):
+    """``track --run`` and ``track --lcm-log`` with a ``--camera NAME=...`` per camera."""
+    run, folder = recorded
+    params = str(folder / "params.yaml")
+    code, _, err = run_cli(["track", "--run", str(folder / "run.npz"), "--params", params,
+                            "--out", str(folder / "from_run")], capsys)
+    assert code == 0, err
+    code, out, err = run_cli(["track", "--lcm-log", str(folder / "run.lcmlog"), "--robot",
+                              str(folder / "robot.yaml"), *_camera_flags(run), "--params",
+                              params, "--out", str(folder / "from_log")], capsys)
+    assert code == 0, err
+    assert ("DRAKE_RGBD_CAMERA_IMAGES_camera (camera), DRAKE_RGBD_CAMERA_IMAGES_post_camera "
+            "(post_camera)") in out
+    direct = json.loads((folder / "from_run" / "report.json").read_text())
+    from_log = json.loads((folder / "from_log" / "report.json").read_text())
+    assert direct["counts"] == from_log["counts"]
+    assert direct["counts"]["images"] == len(run.image_capture_times_s) + len(
+        run.other_cameras[0].capture_times_s)
+    assert from_log["input"]["image_channels"] == image_channels(run)
+    a = read_estimates_csv(folder / "from_run" / "estimates.csv")
+    b = read_estimates_csv(folder / "from_log" / "estimates.csv")
+    assert "post_camera_hand_x_m" in a and set(a) == set(b)
+    assert len(a["t_s"]) == len(run.reading_times_s)
+    for column in a:
+        if column == "t0_s":
+            continue
+        if column == "health":
+            assert (a[column] == b[column]).all()
+            continue
+        np.testing.assert_allclose(b[column], a[column], rtol=0, atol=1e-9, err_msg=column)
+
+
+def test_a_camera_left_out_is_warned(recorded, capsys, caplog):
+    run, folder = recorded
+    with caplog.at_level(logging.WARNING):
+        code, _, err = run_cli(["track", "--lcm-log", str(folder / "run.lcmlog"), "--robot",
+                                str(folder / "robot.yaml"),
+                                *_camera_flags(run, ["post_camera"]), "--params",
+                                str(folder / "params.yaml")], capsys)
+    assert code == 0, err
+    assert "camera(s) ['camera'] have no --camera NAME=WxH" in caplog.text
+
+
+def test_bad_camera_flags_are_one_line_errors(recorded, capsys):
+    run, folder = recorded
+    base = ["track", "--lcm-log", str(folder / "run.lcmlog"), "--robot",
+            str(folder / "robot.yaml")]
+    post = camera_text(run.other_cameras[0].intrinsics)
+    cases = [
+        (_camera_flags(run) + ["--camera", f"side={post}"],
+         "unknown camera 'side': the model's cameras are ['camera', 'post_camera']"),
+        (_camera_flags(run, ["post_camera", "post_camera"]),
+         "two cameras are named 'post_camera'"),
+        (_camera_flags(run) + ["--image-channel", "camera=X", "--image-channel",
+                               "post_camera=X"], "image channel X is given for two cameras"),
+        (_camera_flags(run, ["post_camera"]) + ["--camera", post],
+         "either all unnamed (one camera) or all NAME=... (several)"),
+        (_camera_flags(run, ["post_camera"]) + ["--image-channel", "camera=X"],
+         "--image-channel camera=...: no --camera camera=WxH"),
+        (_camera_flags(run) + ["--image-channel", "post_camera=NOPE"],
+         "has no channel 'NOPE' (--image-channel); its channels (messages): "
+         "DRAKE_RGBD_CAMERA_IMAGES_camera"),
+        (["--camera", "post_camera=80x60"],
+         "camera 'post_camera': camera '80x60' is not WIDTHxHEIGHT:fx,fy,cx,cy"),
+        (["--camera", post, "--camera", post], "several --camera or --image-channel: name "
+                                               "each camera"),
+    ]
+    for flags, message in cases:
+        code, _, err = run_cli(base + flags, capsys)
+        assert_one_line_error(code, err, message)
