@@ -200,6 +200,31 @@ def check_out_dir(path: str) -> Path:
     return out
 
 
+def named_flags(primary: list[str], secondary: list[str], flags: tuple[str, str],
+                value: str) -> tuple[list[tuple[str, str]], dict[str, str]] | None:
+    """The cameras of a repeated ``--A [NAME=]VALUE`` (``primary``) and its companion
+    ``--B [NAME=]VALUE`` (``secondary``), ``flags`` their names: None for one camera (no
+    NAME, each flag at most once), else ``primary``'s (NAME, VALUE) pairs and
+    ``secondary``'s values by NAME. ValueError naming what is wrong (``value``: the form
+    of ``--A``'s value, for the message)."""
+    a, b = flags
+    named = [v for v in primary + secondary if "=" in v]
+    if not named:
+        if len(primary) > 1 or len(secondary) > 1:
+            raise ValueError(f"several {a} or {b}: name each camera, {a} NAME={value} "
+                             f"(RobotConfig.cameras)")
+        return None
+    if len(named) != len(primary) + len(secondary):
+        raise ValueError(f"{a} and {b} are either all {value} (one camera) or all "
+                         f"NAME={value} (several)")
+    pairs = [(name, text) for name, text in (v.split("=", 1) for v in primary)]
+    given = dict(v.split("=", 1) for v in secondary)
+    unknown = sorted(set(given) - {name for name, _ in pairs})
+    if unknown:
+        raise ValueError(f"{b} {unknown[0]}=...: no {a} {unknown[0]}={value}")
+    return pairs, given
+
+
 def _one_line(err: BaseException, named: str | Path | None = None) -> str:
     """``err``'s message on one line, at most 300 characters; without the leading
     ``"<named>: "`` of a loader that names its file, when the caller names it already."""

@@ -15,6 +15,7 @@ from drake_tracker.cli.args import (
     check_params_for_model,
     load_params_arg,
     load_run_arg,
+    named_flags,
     positive_int,
     positive_seconds,
     resolve_scenario,
@@ -223,20 +224,9 @@ def bag_topics(joints: str | None, depth: list[str] | None, info: list[str] | No
     from drake_tracker.io.bag_source import BagTopics, CameraTopics
 
     depth, info = depth or [], info or []
-    named = [v for v in depth + info if "=" in v]
-    if not named:
-        if len(depth) > 1 or len(info) > 1:
-            raise ValueError("several --depth-topic or --camera-info-topic: name each "
-                             "camera, --depth-topic NAME=TOPIC (RobotConfig.cameras)")
+    named = named_flags(depth, info, ("--depth-topic", "--camera-info-topic"), "TOPIC")
+    if named is None:
         return BagTopics(joints, depth[0] if depth else None, info[0] if info else None)
-    if len(named) != len(depth) + len(info):
-        raise ValueError("--depth-topic and --camera-info-topic are either all TOPIC (one "
-                         "camera) or all NAME=TOPIC (several)")
-    pairs = [v.split("=", 1) for v in depth]
-    infos = dict(v.split("=", 1) for v in info)
-    unknown = sorted(set(infos) - {name for name, _ in pairs})
-    if unknown:
-        raise ValueError(f"--camera-info-topic {unknown[0]}=...: no --depth-topic "
-                         f"{unknown[0]}=TOPIC")
+    pairs, infos = named
     return BagTopics(joints, cameras=tuple(CameraTopics(name, topic, infos.get(name))
                                            for name, topic in pairs))

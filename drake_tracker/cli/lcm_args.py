@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING
 
-from drake_tracker.cli.args import UsageError, check_params_for_model
+from drake_tracker.cli.args import UsageError, check_params_for_model, named_flags
 
 if TYPE_CHECKING:
     from drake_tracker.core.sensors.camera import CameraIntrinsics
@@ -52,22 +52,12 @@ def lcm_cameras(cameras: list[str], channels: list[str] | None
         camera_from_text,
     )
 
-    channels = channels or []
-    named = [v for v in cameras + channels if "=" in v]
-    if not named:
-        if len(cameras) > 1 or len(channels) > 1:
-            raise ValueError("several --camera or --image-channel: name each camera, "
-                             "--camera NAME=WxH:fx,fy,cx,cy (RobotConfig.cameras)")
+    named = named_flags(cameras, channels or [], ("--camera", "--image-channel"),
+                        "WxH:fx,fy,cx,cy")
+    if named is None:
         return (camera_from_text(cameras[0]),
                 channels[0] if channels else DRAKE_RGBD_CAMERA_IMAGES)
-    if len(named) != len(cameras) + len(channels):
-        raise ValueError("--camera and --image-channel are either all unnamed (one camera) "
-                         "or all NAME=... (several)")
-    pairs = [v.split("=", 1) for v in cameras]
-    given = dict(v.split("=", 1) for v in channels)
-    unknown = sorted(set(given) - {name for name, _ in pairs})
-    if unknown:
-        raise ValueError(f"--image-channel {unknown[0]}=...: no --camera {unknown[0]}=WxH:...")
+    pairs, given = named
     found = []
     for name, text in pairs:
         try:

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.io.camera_sources import check_camera_sources
 from drake_tracker.io.ros_messages import depth_from_image, require_rosbags, stamp_ns
 from drake_tracker.io.stream import (
     Event,
@@ -92,17 +93,8 @@ def check_camera_topics(cameras: tuple[CameraTopics, ...],
     """ValueError for a camera the model does not have (with ``model_cameras``, the
     model's camera names), two cameras of one name, or one depth topic for two
     cameras."""
-    names = [c.name for c in cameras]
-    for name in names:
-        if model_cameras is not None and name not in model_cameras:
-            raise ValueError(f"unknown camera '{name}': the model's cameras are "
-                             f"{model_cameras} (RobotConfig.cameras)")
-        if names.count(name) > 1:
-            raise ValueError(f"two cameras are named '{name}': give each depth topic once")
-    topics = [c.depth for c in cameras]
-    twice = sorted({t for t in topics if topics.count(t) > 1})
-    if twice:
-        raise ValueError(f"depth topic {twice[0]} is given for two cameras")
+    check_camera_sources([c.name for c in cameras], [c.depth for c in cameras],
+                         "depth topic", model_cameras)
 
 
 def info_topic_beside(reader: Any, depth_topic: str, camera: str) -> str:

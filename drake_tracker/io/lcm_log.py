@@ -38,6 +38,7 @@ from typing import Any
 from drake import lcmt_image_array
 
 from drake_tracker.core.sensors.camera import CameraIntrinsics
+from drake_tracker.io.camera_sources import check_camera_sources
 from drake_tracker.io.lcm_messages import (
     DRAKE_RGBD_CAMERA_IMAGES,
     IIWA_STATUS,
@@ -113,17 +114,8 @@ def check_lcm_cameras(cameras: Sequence[LcmCamera],
     two cameras."""
     if not cameras:
         raise ValueError("no depth camera: give at least one")
-    names = [c.name for c in cameras]
-    for name in names:
-        if model_cameras is not None and name not in model_cameras:
-            raise ValueError(f"unknown camera '{name}': the model's cameras are "
-                             f"{model_cameras} (RobotConfig.cameras)")
-        if names.count(name) > 1:
-            raise ValueError(f"two cameras are named '{name}': give each camera once")
-    channels = [c.channel for c in cameras]
-    twice = [c for c in channels if channels.count(c) > 1]
-    if twice:
-        raise ValueError(f"image channel {twice[0]} is given for two cameras")
+    check_camera_sources([c.name for c in cameras], [c.channel for c in cameras],
+                         "image channel", model_cameras)
 
 
 class LcmLogSource:

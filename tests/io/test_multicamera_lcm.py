@@ -139,9 +139,9 @@ def test_bad_camera_flags_are_one_line_errors(recorded, capsys):
         (_camera_flags(run) + ["--image-channel", "camera=X", "--image-channel",
                                "post_camera=X"], "image channel X is given for two cameras"),
         (_camera_flags(run, ["post_camera"]) + ["--camera", post],
-         "either all unnamed (one camera) or all NAME=... (several)"),
+         "either all WxH:fx,fy,cx,cy (one camera) or all NAME=WxH:fx,fy,cx,cy (several)"),
         (_camera_flags(run, ["post_camera"]) + ["--image-channel", "camera=X"],
-         "--image-channel camera=...: no --camera camera=WxH"),
+         "--image-channel camera=...: no --camera camera=WxH:fx,fy,cx,cy"),
         (_camera_flags(run) + ["--image-channel", "post_camera=NOPE"],
          "has no channel 'NOPE' (--image-channel); its channels (messages): "
          "DRAKE_RGBD_CAMERA_IMAGES_camera"),

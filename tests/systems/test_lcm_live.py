@@ -51,6 +51,22 @@ def _bad_arrays(run):
     return bad
 
 
+def _publish(simulator, bus, messages, times, sample):
+    """Publishes ``messages`` (log µs, channel, bytes) on ``bus`` at their log times while
+    the Simulator advances, and returns ``sample()`` at each of ``times``."""
+    samples, i = [], 0
+    for t in times:
+        while i < len(messages) and messages[i][0] / 1e6 <= t:
+            log_us, channel, data = messages[i]
+            simulator.AdvanceTo(log_us / 1e6)
+            bus.Publish(channel, data)
+            i += 1
+        simulator.AdvanceTo(t)
+        samples.append(sample())
+    assert i == len(messages)
+    return samples
+
+
 def test_the_lcm_diagram_gives_the_offline_estimates(apollo):
     run = synthetic_run(apollo, duration_s=0.6, encoder_rate_hz=1.0 / H,
                         seed=4).stamped_in_microseconds()
@@ -74,16 +90,8 @@ def test_the_lcm_diagram_gives_the_offline_estimates(apollo):
     bank_context = live.tracker.kalman_bank.GetMyContextFromRoot(context)
     messages = sorted([*run_messages(run, base_us=0), *_bad_arrays(run)],
                       key=lambda m: m[0])
-    diagram, i = [], 0
-    for t in run.reading_times_s + 0.6 * H:
-        while i < len(messages) and messages[i][0] / 1e6 <= t:
-            log_us, channel, data = messages[i]
-            simulator.AdvanceTo(log_us / 1e6)
-            bus.Publish(channel, data)
-            i += 1
-        simulator.AdvanceTo(t)
-        diagram.append(live.tracker.estimated_position.Eval(bank_context).copy())
-    assert i == len(messages)
+    diagram = _publish(simulator, bus, messages, run.reading_times_s + 0.6 * H,
+                       lambda: live.tracker.estimated_position.Eval(bank_context).copy())
 
     status_context = live.status.GetMyContextFromRoot(context)
     assert live.status.get_time_measured_output_port().Eval(status_context)[0] == \
@@ -153,16 +161,8 @@ def test_two_cameras_on_their_own_channels_give_the_offline_estimates():
     messages = list(run_messages(run, base_us=0))
     assert {m[1] for m in messages} == {"IIWA_STATUS", "DRAKE_RGBD_CAMERA_IMAGES_camera",
                                         "DRAKE_RGBD_CAMERA_IMAGES_post_camera"}
-    diagram, i = [], 0
-    for t in times:
-        while i < len(messages) and messages[i][0] / 1e6 <= t:
-            log_us, channel, data = messages[i]
-            simulator.AdvanceTo(log_us / 1e6)
-            bus.Publish(channel, data)
-            i += 1
-        simulator.AdvanceTo(t)
-        diagram.append(live.tracker.estimated_position.Eval(bank_context).copy())
-    assert i == len(messages)
+    diagram = _publish(simulator, bus, messages, times,
+                       lambda: live.tracker.estimated_position.Eval(bank_context).copy())
     cpf = live.tracker.image_update
     state = cpf.state(cpf.GetMyContextFromRoot(context))
     assert state.images_applied + (state.in_flight is not None) == sum(applied.values())
