@@ -114,6 +114,9 @@ class StreamCounts:
     #: Images the tracker skipped, by kind; ``not due`` are the ones its pacing
     #: (``image.min_image_interval_s``) left out.
     images_skipped: dict[str, int] = field(default_factory=dict)
+    #: With named cameras: each camera's ``images``, ``applied`` and ``skipped`` (the
+    #: tracker's skips and the unusable images) by name.
+    cameras: dict[str, dict[str, int]] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
         """The counts as plain JSON types."""
@@ -122,7 +125,9 @@ class StreamCounts:
                 "source_skipped": dict(self.source_skipped),
                 "readings_skipped": dict(self.readings_skipped),
                 "readings_with_missing_joints": self.readings_with_missing_joints,
-                "images_skipped": dict(self.images_skipped)}
+                "images_skipped": dict(self.images_skipped),
+                **({"cameras": {k: dict(v) for k, v in self.cameras.items()}}
+                   if self.cameras else {})}
 
 
 def track_stream(events: Iterable[Event], tracker: Tracker,
@@ -154,6 +159,9 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
                            int(image.sequence))
         if observer is not None:
             observer.before(frame.arrival_time_s, tracker)
+        applied = tracker.num_images_applied
+        mine = (counts.cameras.setdefault(image.camera, dict.fromkeys(
+            ("images", "applied", "skipped"), 0)) if image.camera is not None else None)
         try:
             tracker.add_image(frame, camera=image.camera)
         except ValueError as err:
@@ -163,6 +171,10 @@ def track_stream(events: Iterable[Event], tracker: Tracker,
         else:
             if on_image is not None:
                 on_image(tracker, frame)
+        if mine is not None:
+            mine["images"] += 1
+            done = tracker.num_images_applied > applied
+            mine["applied" if done else "skipped"] += 1
 
     try:
         for event in events:

@@ -162,6 +162,9 @@ def print_report(report: dict) -> None:
     c = report["counts"]
     print(f"{c['readings']} readings, {c['images']} images: {c['images_applied']} applied; "
           f"{c['estimates']} estimates written")
+    for name, mine in c.get("cameras", {}).items():
+        print(f"  camera {name}: {mine['images']} images, {mine['applied']} applied, "
+              f"{mine['skipped']} skipped")
     for name in ("source_skipped", "readings_skipped", "images_skipped"):
         if c[name]:
             print(f"  {name.replace('_', ' ')}: " +

@@ -102,6 +102,15 @@ def test_round_trip_gives_the_same_estimates(recorded, capsys):
     assert direct["counts"]["images"] == len(run.image_capture_times_s) + len(
         run.other_cameras[0].capture_times_s)
     assert from_log["input"]["image_channels"] == image_channels(run)
+    # Each camera's images, applied and skipped, adding up to the whole's.
+    cameras = direct["counts"]["cameras"]
+    assert {name: c["images"] for name, c in cameras.items()} == {
+        "camera": len(run.image_capture_times_s),
+        "post_camera": len(run.other_cameras[0].capture_times_s)}
+    assert all(c["applied"] > 0 and c["applied"] + c["skipped"] == c["images"]
+               for c in cameras.values())
+    assert sum(c["applied"] for c in cameras.values()) == direct["counts"]["images_applied"]
+    assert "  camera post_camera: " in out
     a = read_estimates_csv(folder / "from_run" / "estimates.csv")
     b = read_estimates_csv(folder / "from_log" / "estimates.csv")
     assert "post_camera_hand_x_m" in a and set(a) == set(b)
