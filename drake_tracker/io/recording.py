@@ -37,6 +37,7 @@ the intrinsics are those of the stored images.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +45,8 @@ from pathlib import Path
 import numpy as np
 
 from drake_tracker.core.sensors.camera import CameraIntrinsics
+
+log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 2
 #: The versions :meth:`RecordedRun.load` reads.
@@ -170,6 +173,19 @@ class RecordedRun:
             raise ValueError(f"two cameras of the run have the same name: {names}")
         for camera in self.other_cameras:
             camera.validate(T)
+
+    def warn_unplayable(self, what: str) -> None:
+        """Logs a warning naming each camera's images without a finite arrival stamp,
+        which ``what`` (a writer of the run in arrival order) leaves out."""
+        cameras = [(self.camera_name, self.image_arrival_times_s)] + [
+            (c.name, c.arrival_times_s) for c in self.other_cameras]
+        for name, arrivals in cameras:
+            bad = np.flatnonzero(~np.isfinite(np.asarray(arrivals, float)))
+            if len(bad):
+                log.warning("%s: %d image(s) of camera '%s' not written (%s): no finite "
+                            "arrival stamp to place them at", what, len(bad), name,
+                            ", ".join(str(i) for i in bad[:5]) + (" ..." if len(bad) > 5
+                                                                  else ""))
 
     def images_in_arrival_order(self) -> tuple[np.ndarray, np.ndarray]:
         """(indices of the images whose arrival stamp is a finite time, in arrival order;

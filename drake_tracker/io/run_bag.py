@@ -89,6 +89,7 @@ def truth_tf_frames(run: RecordedRun) -> list[tuple[str, str, str, np.ndarray]]:
 
     Raises ValueError naming a camera whose true offsets are missing: none, not one row
     of six values per truth sample, or a value that is not finite."""
+    run.warn_unplayable("bag")
     frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
     offsets = run.truth_offsets_by_camera
     expected = (len(run.truth_times_s), 6)
@@ -179,6 +180,7 @@ def _messages(run: RecordedRun, m: RosMessages, base_ns: int,
                 s, hand_frame, pose_values(X))
             yield stamp, 5, "truth_joints", lambda s=stamp, q=q: m.joint_state(s, names, q)
 
+    run.warn_unplayable("bag")
     frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
     cameras = [images(run.camera_name, run.camera_intrinsics, run.image_capture_times_s,
                       run.image_arrival_times_s, run.depth_images_m, CAMERA_FRAME)]

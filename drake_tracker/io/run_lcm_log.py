@@ -99,6 +99,7 @@ def run_messages(run: RecordedRun, base_us: int = DEFAULT_BASE_US,
                 lambda s=stamp, d=depth: image_array_message(s, [depth_image_message(
                     s, d if depth_type == "float32" else millimetres(d), compress)]))
 
+    run.warn_unplayable("LCM log")
     channels = image_channels(run)
     cameras = [images(channels[run.camera_name], run.image_capture_times_s,
                       run.image_arrival_times_s, run.depth_images_m)]

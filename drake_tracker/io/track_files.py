@@ -47,6 +47,12 @@ def run_events(run: RecordedRun) -> Iterator[Event]:
         yield SkippedMessage("images without an arrival time", f"image {i} skipped: its "
                              f"arrival stamp is {float(run.image_arrival_times_s[i])!r}, "
                              f"not a time")
+    for camera in run.other_cameras:
+        arrivals = np.asarray(camera.arrival_times_s, float)
+        for i in np.flatnonzero(~np.isfinite(arrivals)):
+            yield SkippedMessage("images without an arrival time", f"image {i} of camera "
+                                 f"'{camera.name}' skipped: its arrival stamp is "
+                                 f"{float(arrivals[i])!r}, not a time")
     readings = ((float(t), ReadingEvent(float(t), q))
                 for t, q in zip(run.reading_times_s, run.readings_rad))
     several = bool(run.other_cameras)
@@ -60,7 +66,7 @@ def run_events(run: RecordedRun) -> Iterator[Event]:
 
 def _camera_images(camera) -> Iterator[tuple[float, ImageEvent]]:
     """A further camera's images (``io/recording.CameraImages``), in arrival order (those
-    without a finite arrival are not played)."""
+    without a finite arrival are not played: ``run_events`` counts them)."""
     arrivals = np.asarray(camera.arrival_times_s, float)
     for i in np.argsort(arrivals, kind="stable"):
         if np.isfinite(arrivals[i]):

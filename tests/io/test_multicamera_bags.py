@@ -205,3 +205,27 @@ def test_a_camera_of_the_robot_without_a_depth_topic_is_named(recorded, capsys, 
                                 str(folder / "both")], capsys)
     assert code == 0, err
     assert "have no --depth-topic" not in caplog.text
+
+
+def test_an_image_without_an_arrival_is_warned_when_the_bag_is_written(recorded, tmp_path,
+                                                                       caplog):
+    import logging
+
+    run, _ = recorded
+    post = run.other_cameras[0]
+    arrivals = post.arrival_times_s.copy()
+    arrivals[4] = np.nan
+    broken = dataclasses.replace(run, other_cameras=[
+        dataclasses.replace(post, arrival_times_s=arrivals)])
+    with caplog.at_level(logging.WARNING):
+        write_run_bag(broken, tmp_path / "broken.mcap")
+    assert "bag: 1 image(s) of camera 'post_camera' not written (4)" in caplog.text
+    source = BagSource(tmp_path / "broken.mcap", model_for_run(run).robot_joint_names,
+                       BagTopics(cameras=(
+                           CameraTopics("camera", "/camera/depth/image_raw"),
+                           CameraTopics("post_camera", "/post_camera/depth/image_raw"))))
+    try:
+        images = [e for e in source.events() if hasattr(e, "depth")]
+    finally:
+        source.close()
+    assert sum(e.camera == "post_camera" for e in images) == len(arrivals) - 1

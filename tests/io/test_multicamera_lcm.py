@@ -162,3 +162,32 @@ def test_bad_camera_flags_are_one_line_errors(recorded, capsys):
     for flags, message in cases:
         code, _, err = run_cli(base + flags, capsys)
         assert_one_line_error(code, err, message)
+
+
+def test_images_without_an_arrival_are_counted_or_warned_never_lost_silently(
+        recorded, tmp_path, caplog):
+    """An image stamped with no finite arrival cannot be played or written in arrival
+    order: the replay counts it (each camera's), the LCM writer warns, per camera."""
+    import dataclasses
+
+    from drake_tracker.io.stream import SkippedMessage
+    from drake_tracker.io.track_files import run_events
+
+    run, _ = recorded
+    first = run.image_arrival_times_s.copy()
+    first[2] = np.nan
+    post = run.other_cameras[0]
+    arrivals = post.arrival_times_s.copy()
+    arrivals[[1, 3]] = np.inf
+    broken = dataclasses.replace(run, image_arrival_times_s=first, other_cameras=[
+        dataclasses.replace(post, arrival_times_s=arrivals)])
+    skipped = [e.why for e in run_events(broken) if isinstance(e, SkippedMessage)]
+    assert len(skipped) == 3
+    assert sum("of camera 'post_camera'" in why for why in skipped) == 2
+    with caplog.at_level(logging.WARNING):
+        write_run_lcm_log(broken, tmp_path / "broken.lcmlog")
+    assert "1 image(s) of camera 'camera' not written (2)" in caplog.text
+    assert "2 image(s) of camera 'post_camera' not written (1, 3)" in caplog.text
+    counts = Counter(event.channel for event in read_log(tmp_path / "broken.lcmlog"))
+    assert counts["DRAKE_RGBD_CAMERA_IMAGES_camera"] == len(first) - 1
+    assert counts["DRAKE_RGBD_CAMERA_IMAGES_post_camera"] == len(arrivals) - 2
