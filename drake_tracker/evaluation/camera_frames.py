@@ -149,18 +149,29 @@ def camera_summary(rows: Iterable[dict], settle_s: float) -> str:
              "mm (worst p50) | hand: p50 deg | its pose in the world: p50 mm, deg | its "
              f"offset from {settle_s:g} s: mm (worst), deg (worst) |",
              "|---|---|---|---|---|---|---|---|---|"]
+    unsettled = False
     for (sequence, bias, method, camera), seeds in sorted(cells.items()):
         hand = _per_seed(seeds, "hand_mm")
         offset_mm = _per_seed(seeds, "offset_mm_settled")
         offset_deg = _per_seed(seeds, "offset_deg_settled")
+        unsettled |= not np.isfinite(offset_mm).any()
         lines.append(
             f"| {sequence} | {bias} | {method} | {camera} | {len(seeds)} | "
-            f"{_median(hand):.1f} / {_median(_per_seed(seeds, 'hand_mm', 75)):.1f} "
-            f"({_worst(hand):.1f}) | {_median(_per_seed(seeds, 'hand_deg')):.2f} | "
-            f"{_median(_per_seed(seeds, 'pose_mm')):.1f}, "
-            f"{_median(_per_seed(seeds, 'pose_deg')):.2f} | {_median(offset_mm):.1f} "
-            f"({_worst(offset_mm):.1f}), {_median(offset_deg):.2f} ({_worst(offset_deg):.2f}) |")
+            f"{_text(_median(hand), 1)} / {_text(_median(_per_seed(seeds, 'hand_mm', 75)), 1)} "
+            f"({_text(_worst(hand), 1)}) | {_text(_median(_per_seed(seeds, 'hand_deg')), 2)} | "
+            f"{_text(_median(_per_seed(seeds, 'pose_mm')), 1)}, "
+            f"{_text(_median(_per_seed(seeds, 'pose_deg')), 2)} | "
+            f"{_text(_median(offset_mm), 1)} ({_text(_worst(offset_mm), 1)}), "
+            f"{_text(_median(offset_deg), 2)} ({_text(_worst(offset_deg), 2)}) |")
+    if unsettled:
+        lines += ["", f"n/a: no sample from {settle_s:g} s on (a run shorter than the "
+                      f"settling time, `--settle-s`)."]
     return "\n".join(lines)
+
+
+def _text(value: float, digits: int) -> str:
+    """``value`` with ``digits`` decimals, or ``n/a`` for no value (NaN)."""
+    return f"{value:.{digits}f}" if math.isfinite(value) else "n/a"
 
 
 def _per_seed(seeds: list[dict], name: str, percentile: float = 50.0) -> np.ndarray:

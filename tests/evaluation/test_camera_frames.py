@@ -109,3 +109,15 @@ def test_a_camera_the_run_never_recorded_leaves_the_run_evaluated_without_camera
         errors = evaluate_run(run, ("full_fusion",), min_image_interval_s=0.0)
     assert "cameras" not in errors["full_fusion"]
     assert np.isfinite(errors["full_fusion"]["translation_mm"]).any()
+
+
+def test_a_run_shorter_than_the_settling_time_reads_n_a_not_nan():
+    rows = [{"sequence": "s", "bias": "none", "method": "full_fusion", "seed": 0,
+             "time_s": t, "camera": "post", "hand_mm": 1.0, "hand_deg": 0.1,
+             "pose_mm": 2.0, "pose_deg": 0.2, "offset_mm": 3.0, "offset_deg": 0.3}
+            for t in (0.0, 0.5, 1.0)]
+    table = camera_summary(rows, settle_s=5.0)
+    assert "nan" not in table
+    assert "| 1 | 1.0 / 1.0 (1.0) | 0.10 | 2.0, 0.20 | n/a (n/a), n/a (n/a) |" in table
+    assert "n/a: no sample from 5 s on" in table
+    assert "n/a" not in camera_summary(rows, settle_s=0.5)
