@@ -89,7 +89,6 @@ def truth_tf_frames(run: RecordedRun) -> list[tuple[str, str, str, np.ndarray]]:
 
     Raises ValueError naming a camera whose true offsets are missing: none, not one row
     of six values per truth sample, or a value that is not finite."""
-    run.warn_unplayable("bag")
     frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
     offsets = run.truth_offsets_by_camera
     expected = (len(run.truth_times_s), 6)

@@ -219,7 +219,7 @@ def test_an_image_without_an_arrival_is_warned_when_the_bag_is_written(recorded,
         dataclasses.replace(post, arrival_times_s=arrivals)])
     with caplog.at_level(logging.WARNING):
         write_run_bag(broken, tmp_path / "broken.mcap")
-    assert "bag: 1 image(s) of camera 'post_camera' not written (4)" in caplog.text
+    assert caplog.text.count("bag: 1 image(s) of camera 'post_camera' not written (4)") == 1
     source = BagSource(tmp_path / "broken.mcap", model_for_run(run).robot_joint_names,
                        BagTopics(cameras=(
                            CameraTopics("camera", "/camera/depth/image_raw"),

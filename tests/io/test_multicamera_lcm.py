@@ -186,7 +186,7 @@ def test_images_without_an_arrival_are_counted_or_warned_never_lost_silently(
     assert sum("of camera 'post_camera'" in why for why in skipped) == 2
     with caplog.at_level(logging.WARNING):
         write_run_lcm_log(broken, tmp_path / "broken.lcmlog")
-    assert "1 image(s) of camera 'camera' not written (2)" in caplog.text
+    assert caplog.text.count("1 image(s) of camera 'camera' not written (2)") == 1
     assert "2 image(s) of camera 'post_camera' not written (1, 3)" in caplog.text
     counts = Counter(event.channel for event in read_log(tmp_path / "broken.lcmlog"))
     assert counts["DRAKE_RGBD_CAMERA_IMAGES_camera"] == len(first) - 1
