@@ -72,6 +72,15 @@ class CameraImages:
     depth_images_m: np.ndarray
     truth_camera_offset: np.ndarray
 
+    def arrival_order(self) -> tuple[np.ndarray, np.ndarray]:
+        """(indices of the images whose arrival stamp is a finite time, in arrival order;
+        indices of those whose stamp is not: they cannot be played or written in arrival
+        order, and a player skips, warns about and counts them)."""
+        arrivals = np.asarray(self.arrival_times_s, float)
+        order = np.argsort(arrivals, kind="stable")
+        playable = np.isfinite(arrivals[order])
+        return order[playable], order[~playable]
+
     def validate(self, num_truth: int) -> None:
         """Raises ValueError naming the camera and its first inconsistent field."""
         count = len(self.capture_times_s)
@@ -120,16 +129,23 @@ class RecordedRun:
         return [self.camera_name] + [c.name for c in self.other_cameras]
 
     @property
+    def cameras(self) -> list[CameraImages]:
+        """Every camera's images, the first first (the run's own image fields, as a
+        :class:`CameraImages` that shares their arrays)."""
+        first = CameraImages(self.camera_name, self.camera_intrinsics,
+                             self.image_capture_times_s, self.image_arrival_times_s,
+                             self.depth_images_m, self.truth_camera_offset)
+        return [first, *self.other_cameras]
+
+    @property
     def intrinsics_by_camera(self) -> dict[str, CameraIntrinsics]:
         """Every camera's intrinsics by name, the first first (``Tracker(cameras=...)``)."""
-        return {self.camera_name: self.camera_intrinsics} | {
-            c.name: c.intrinsics for c in self.other_cameras}
+        return {c.name: c.intrinsics for c in self.cameras}
 
     @property
     def truth_offsets_by_camera(self) -> dict[str, np.ndarray]:
         """Every camera's (T, 6) true offset values by name, the first first."""
-        return {self.camera_name: self.truth_camera_offset} | {
-            c.name: c.truth_camera_offset for c in self.other_cameras}
+        return {c.name: c.truth_camera_offset for c in self.cameras}
 
     def __post_init__(self) -> None:
         self.validate()
@@ -177,24 +193,17 @@ class RecordedRun:
     def warn_unplayable(self, what: str) -> None:
         """Logs a warning naming each camera's images without a finite arrival stamp,
         which ``what`` (a writer of the run in arrival order) leaves out."""
-        cameras = [(self.camera_name, self.image_arrival_times_s)] + [
-            (c.name, c.arrival_times_s) for c in self.other_cameras]
-        for name, arrivals in cameras:
-            bad = np.flatnonzero(~np.isfinite(np.asarray(arrivals, float)))
+        for camera in self.cameras:
+            bad = np.sort(camera.arrival_order()[1])
             if len(bad):
                 log.warning("%s: %d image(s) of camera '%s' not written (%s): no finite "
-                            "arrival stamp to place them at", what, len(bad), name,
+                            "arrival stamp to place them at", what, len(bad), camera.name,
                             ", ".join(str(i) for i in bad[:5]) + (" ..." if len(bad) > 5
                                                                   else ""))
 
     def images_in_arrival_order(self) -> tuple[np.ndarray, np.ndarray]:
-        """(indices of the images whose arrival stamp is a finite time, in arrival order;
-        indices of those whose stamp is not: they cannot be played, and a player skips,
-        warns about and counts them)."""
-        arrivals = np.asarray(self.image_arrival_times_s, float)
-        order = np.argsort(arrivals, kind="stable")
-        playable = np.isfinite(arrivals[order])
-        return order[playable], order[~playable]
+        """The first camera's :meth:`CameraImages.arrival_order`."""
+        return self.cameras[0].arrival_order()
 
     def stamped_in(self, ticks_per_second: int) -> RecordedRun:
         """This run with every stamp rounded to the nearest tick of a clock with

@@ -152,16 +152,16 @@ def _messages(run: RecordedRun, m: RosMessages, base_ns: int,
             yield stamp_ns(base_ns, t), 0, "joints", lambda t=t, q=q: m.joint_state(
                 stamp_ns(base_ns, t), names, q)
 
-    def images(name, cam, capture, arrival_s, depth_images, frame):
-        arrivals = np.asarray(arrival_s, float)
-        order = np.argsort(arrivals, kind="stable")
-        for i in order[np.isfinite(arrivals[order])]:
-            stamp = stamp_ns(base_ns, capture[i])
-            arrival = stamp_ns(base_ns, arrivals[i])
-            yield arrival, 1, ("info", name), lambda s=stamp: m.camera_info(
+    def images(camera, frame):
+        cam = camera.intrinsics
+        order, _ = camera.arrival_order()
+        for i in order:
+            stamp = stamp_ns(base_ns, camera.capture_times_s[i])
+            arrival = stamp_ns(base_ns, camera.arrival_times_s[i])
+            yield arrival, 1, ("info", camera.name), lambda s=stamp: m.camera_info(
                 s, frame, cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
-            yield arrival, 2, ("depth", name), lambda s=stamp, i=i: m.depth_image(
-                s, frame, np.asarray(depth_images[i], np.float32))
+            yield arrival, 2, ("depth", camera.name), lambda s=stamp, i=i: m.depth_image(
+                s, frame, np.asarray(camera.depth_images_m[i], np.float32))
 
     hand_frame = true_frames[0][2]
 
@@ -181,10 +181,7 @@ def _messages(run: RecordedRun, m: RosMessages, base_ns: int,
 
     run.warn_unplayable("bag")
     frames = {name: frame for name, (_, _, frame) in camera_topics(run).items()}
-    cameras = [images(run.camera_name, run.camera_intrinsics, run.image_capture_times_s,
-                      run.image_arrival_times_s, run.depth_images_m, CAMERA_FRAME)]
-    cameras += [images(c.name, c.intrinsics, c.capture_times_s, c.arrival_times_s,
-                       c.depth_images_m, frames[c.name]) for c in run.other_cameras]
+    cameras = [images(c, frames[c.name]) for c in run.cameras]
     for log_ns, _, key, build in heapq.merge(readings(), *cameras, truth(),
                                              key=lambda e: (e[0], e[1])):
         yield log_ns, key, build()

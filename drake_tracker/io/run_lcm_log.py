@@ -89,22 +89,18 @@ def run_messages(run: RecordedRun, base_us: int = DEFAULT_BASE_US,
             stamp = _us(base_us, t)
             yield stamp, 0, IIWA_STATUS, lambda s=stamp, q=q: status_message(s, q)
 
-    def images(channel, capture_s, arrival_s, depth_images):
-        arrivals = np.asarray(arrival_s, float)
-        order = np.argsort(arrivals, kind="stable")
-        for i in order[np.isfinite(arrivals[order])]:
-            stamp = _us(base_us, capture_s[i])
-            depth = np.asarray(depth_images[i], np.float32)
-            yield _us(base_us, arrivals[i]), 1, channel, (
+    def images(channel, camera):
+        order, _ = camera.arrival_order()
+        for i in order:
+            stamp = _us(base_us, camera.capture_times_s[i])
+            depth = np.asarray(camera.depth_images_m[i], np.float32)
+            yield _us(base_us, camera.arrival_times_s[i]), 1, channel, (
                 lambda s=stamp, d=depth: image_array_message(s, [depth_image_message(
                     s, d if depth_type == "float32" else millimetres(d), compress)]))
 
     run.warn_unplayable("LCM log")
     channels = image_channels(run)
-    cameras = [images(channels[run.camera_name], run.image_capture_times_s,
-                      run.image_arrival_times_s, run.depth_images_m)]
-    cameras += [images(channels[c.name], c.capture_times_s, c.arrival_times_s,
-                       c.depth_images_m) for c in run.other_cameras]
+    cameras = [images(channels[c.name], c) for c in run.cameras]
     for log_us, _, channel, build in heapq.merge(readings(), *cameras,
                                                  key=lambda e: (e[0], e[1])):
         yield log_us, channel, build()

@@ -38,41 +38,34 @@ log = logging.getLogger(__name__)
 
 def run_events(run: RecordedRun) -> Iterator[Event]:
     """A recorded run's events in arrival order: each reading at its stamp, each image at
-    its recorded arrival (after the readings stamped at it). Images without an arrival
-    time are skipped and counted (``RecordedRun.images_in_arrival_order``)."""
+    its recorded arrival (after the readings stamped at it; at one time, the cameras in
+    the run's order). Images without an arrival time are skipped and counted
+    (``CameraImages.arrival_order``)."""
     from drake_tracker.io.stream import SkippedMessage
 
-    order, unplayable = run.images_in_arrival_order()
-    for i in unplayable:
-        yield SkippedMessage("images without an arrival time", f"image {i} skipped: its "
-                             f"arrival stamp is {float(run.image_arrival_times_s[i])!r}, "
-                             f"not a time")
-    for camera in run.other_cameras:
-        arrivals = np.asarray(camera.arrival_times_s, float)
-        for i in np.flatnonzero(~np.isfinite(arrivals)):
-            yield SkippedMessage("images without an arrival time", f"image {i} of camera "
-                                 f"'{camera.name}' skipped: its arrival stamp is "
-                                 f"{float(arrivals[i])!r}, not a time")
+    several = bool(run.other_cameras)
+    streams = []
+    for camera in run.cameras:
+        order, unplayable = camera.arrival_order()
+        of = f" of camera '{camera.name}'" if several else ""
+        for i in unplayable:
+            yield SkippedMessage("images without an arrival time", f"image {i}{of} "
+                                 f"skipped: its arrival stamp is "
+                                 f"{float(camera.arrival_times_s[i])!r}, not a time")
+        streams.append(_camera_images(camera, order, camera.name if several else None))
     readings = ((float(t), ReadingEvent(float(t), q))
                 for t, q in zip(run.reading_times_s, run.readings_rad))
-    several = bool(run.other_cameras)
-    images = ((float(run.image_arrival_times_s[i]),
-               ImageEvent(float(run.image_capture_times_s[i]), run.depth_images_m[i], int(i),
-                          float(run.image_arrival_times_s[i]),
-                          run.camera_name if several else None)) for i in order)
-    yield from merge_by_time(readings, images, *(
-        _camera_images(camera) for camera in run.other_cameras))
+    yield from merge_by_time(readings, *streams)
 
 
-def _camera_images(camera) -> Iterator[tuple[float, ImageEvent]]:
-    """A further camera's images (``io/recording.CameraImages``), in arrival order (those
-    without a finite arrival are not played: ``run_events`` counts them)."""
-    arrivals = np.asarray(camera.arrival_times_s, float)
-    for i in np.argsort(arrivals, kind="stable"):
-        if np.isfinite(arrivals[i]):
-            yield float(arrivals[i]), ImageEvent(float(camera.capture_times_s[i]),
-                                                 camera.depth_images_m[i], int(i),
-                                                 float(arrivals[i]), camera.name)
+def _camera_images(camera, order: np.ndarray,
+                   name: str | None) -> Iterator[tuple[float, ImageEvent]]:
+    """(arrival, image) of a camera's images (``io/recording.CameraImages``) in
+    ``order``, each named ``name`` (None: a run's one camera)."""
+    for i in order:
+        arrival = float(camera.arrival_times_s[i])
+        yield arrival, ImageEvent(float(camera.capture_times_s[i]), camera.depth_images_m[i],
+                                  int(i), arrival, name)
 
 
 class TruthSampler:
