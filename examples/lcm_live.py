@@ -140,10 +140,8 @@ def main() -> None:
     model = build_tracker_model(load_robot_config(Path(args.robot).read_text()))
     lcm = DrakeLcm(args.lcm_url) if args.lcm_url else DrakeLcm()
     cameras = lcm_cameras(args.camera, None)
-    if isinstance(cameras, list):
-        live = build(lcm, model, {c.name: c.intrinsics for c in cameras}, args.encoder_period)
-    else:
-        live = build(lcm, model, cameras[0], args.encoder_period)
+    live = build(lcm, model, cameras[0].intrinsics if cameras[0].name is None else
+                 {c.name: c.intrinsics for c in cameras}, args.encoder_period)
     simulator = Simulator(live.diagram)
     simulator.set_target_realtime_rate(1.0)
     simulator.AdvanceTo(args.duration)

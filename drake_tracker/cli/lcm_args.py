@@ -39,33 +39,34 @@ def add_lcm_track_arguments(p: argparse.ArgumentParser) -> None:
                         "messages' fingerprint)")
 
 
-def lcm_cameras(cameras: list[str], channels: list[str] | None
-                ) -> tuple[CameraIntrinsics, str] | list[LcmCamera]:
+def lcm_cameras(cameras: list[str], channels: list[str] | None) -> list[LcmCamera]:
     """The cameras of ``--camera`` and ``--image-channel``: one camera (``WxH:...``,
-    each flag at most once) as (intrinsics, channel), or several (``NAME=WxH:...``, a
-    channel for a named camera only) as ``LcmCamera``s. ValueError naming what is
+    each flag at most once), named None, on its channel (default
+    ``DRAKE_RGBD_CAMERA_IMAGES``), or several (``NAME=WxH:...``, a channel for a named
+    camera only, default ``DRAKE_RGBD_CAMERA_IMAGES_NAME``). ValueError naming what is
     wrong."""
     from drake_tracker.io.lcm_log import LcmCamera
-    from drake_tracker.io.lcm_messages import (
-        DRAKE_RGBD_CAMERA_IMAGES,
-        camera_channel,
-        camera_from_text,
-    )
+    from drake_tracker.io.lcm_messages import DRAKE_RGBD_CAMERA_IMAGES, camera_channel
 
     named = named_flags(cameras, channels or [], ("--camera", "--image-channel"),
                         "WxH:fx,fy,cx,cy")
     if named is None:
-        return (camera_from_text(cameras[0]),
-                channels[0] if channels else DRAKE_RGBD_CAMERA_IMAGES)
+        return [LcmCamera(None, channels[0] if channels else DRAKE_RGBD_CAMERA_IMAGES,
+                          _intrinsics(cameras[0], None))]
     pairs, given = named
-    found = []
-    for name, text in pairs:
-        try:
-            intrinsics = camera_from_text(text)
-        except ValueError as err:
-            raise ValueError(f"camera '{name}': {err}") from None
-        found.append(LcmCamera(name, given.get(name, camera_channel(name)), intrinsics))
-    return found
+    return [LcmCamera(name, given.get(name, camera_channel(name)), _intrinsics(text, name))
+            for name, text in pairs]
+
+
+def _intrinsics(text: str, name: str | None) -> CameraIntrinsics:
+    """``--camera``'s intrinsics ``text`` (of camera ``name``); a ValueError saying so."""
+    from drake_tracker.io.lcm_messages import camera_from_text
+
+    try:
+        return camera_from_text(text)
+    except ValueError as err:
+        raise ValueError(f"--camera: {err}" if name is None else
+                         f"--camera: camera '{name}': {err}") from None
 
 
 def check_lcm_flags(args: argparse.Namespace) -> None:
@@ -87,22 +88,17 @@ def track_lcm_log_command(args: argparse.Namespace, params: TrackerParams,
     try:
         cameras = lcm_cameras(args.camera, args.image_channel)
     except ValueError as err:
-        raise UsageError(f"--camera: {err}" if "WIDTHxHEIGHT" in str(err) else str(err)
-                         ) from None
+        raise UsageError(str(err)) from None
     if args.params:
         check_params_for_model(params, model, f"parameter file '{args.params}'")
     try:
         from drake_tracker.io.lcm_log import LcmLogSource, check_lcm_cameras
         from drake_tracker.io.track_files import print_report, track_lcm_log
 
-        if isinstance(cameras, list):
+        if cameras[0].name is not None:
             check_lcm_cameras(cameras, model.camera_names)
-            source = LcmLogSource(args.lcm_log, model.robot_joint_names, cameras,
-                                  args.status_channel, status_type=args.status_type or "auto")
-        else:
-            source = LcmLogSource(args.lcm_log, model.robot_joint_names, cameras[0],
-                                  args.status_channel, cameras[1],
-                                  args.status_type or "auto")
+        source = LcmLogSource(args.lcm_log, model.robot_joint_names, cameras,
+                              args.status_channel, status_type=args.status_type or "auto")
         report = track_lcm_log(source, model, params, args.out)
     except (ImportError, ValueError) as err:
         raise UsageError(" ".join(str(err).split())) from None

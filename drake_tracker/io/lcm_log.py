@@ -125,8 +125,8 @@ class LcmLogSource:
         path: the ``lcm-logger`` file.
         joint_names: the model's robot joints, in its order (the status's order).
         camera: the depth camera's intrinsics (one camera, on ``image_channel``; an
-            ``lcmt_image`` carries none), or several cameras, each an
-            :class:`LcmCamera` with its own channel.
+            ``lcmt_image`` carries none), or the cameras, each an :class:`LcmCamera`
+            with its own channel (one named None: the model's one camera).
         status_channel: the status channel (None: ``IIWA_STATUS`` or ``PANDA_STATUS``,
             whichever the log holds).
         image_channel: the one camera's ``lcmt_image_array`` channel.
