@@ -237,15 +237,13 @@ def run_record(args: argparse.Namespace) -> int:
                  else " ".join(f"--camera {name}={camera_text(camera)}"
                                for name, camera in run.intrinsics_by_camera.items()))
         written.append(f"{lcm_log} ({count} messages; track it with {flags})")
-    counts = [len(run.image_capture_times_s)] + [len(c.capture_times_s)
-                                                 for c in run.other_cameras]
-    images = ", ".join(f"{k} from {name} ({c.width}x{c.height})" for k, (name, c) in
-                       zip(counts, run.intrinsics_by_camera.items()))
+    counts = [(len(c.capture_times_s), c.name, f"{c.intrinsics.width}x{c.intrinsics.height}")
+              for c in run.cameras]
     if not run.other_cameras:
-        c = run.camera_intrinsics
-        images = f"{counts[0]} images ({c.width}x{c.height})"
+        images = f"{counts[0][0]} images ({counts[0][2]})"
     else:
-        images = f"{sum(counts)} images: {images}"
+        each = ", ".join(f"{k} from {name} ({size})" for k, name, size in counts)
+        images = f"{sum(k for k, _, _ in counts)} images: {each}"
     print(f"recorded '{scenario.name}': {len(run.reading_times_s)} readings, {images}, "
           f"{len(run.truth_times_s)} truth samples, {run.extra['wall_time_s']:.1f} s -> "
           f"{', '.join(written)}")
