@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.evaluation.summary import is_settled
 from drake_tracker.metrics import pose_errors
 
 if TYPE_CHECKING:
@@ -135,7 +136,7 @@ def camera_summary(rows: Iterable[dict], settle_s: float) -> str:
     runs: dict[tuple, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for row in rows:
         key = (row["sequence"], row["bias"], row["method"], row["camera"], row["seed"])
-        late = float(row["time_s"]) >= settle_s - 1e-9
+        late = is_settled(row, settle_s)
         for name in _ERRORS:
             value = float(row[name])
             if math.isfinite(value):

@@ -26,9 +26,15 @@ def read_errors_csv(path: Path) -> list[dict]:
     return list(csv.DictReader(io.StringIO(text)))
 
 
+def is_settled(row: dict, settle_s: float) -> bool:
+    """Whether ``row`` was sampled at or after ``settle_s`` (s from the start of its run;
+    the CSV's rounding of the time allowed for)."""
+    return float(row["time_s"]) >= settle_s - 1e-9
+
+
 def settled(rows: list[dict], settle_s: float) -> list[dict]:
     """The rows sampled at or after ``settle_s`` (s from the start of their run)."""
-    return [r for r in rows if float(r["time_s"]) >= settle_s - 1e-9]
+    return [r for r in rows if is_settled(r, settle_s)]
 
 
 def summarize(rows: list[dict], settle_s: float = 0.0) -> list[dict]:
