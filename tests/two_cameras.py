@@ -1,6 +1,7 @@
 """Apollo with a second depth camera on a post, and the camera model of both (shared by
 the tests of several cameras: ``systems/``, ``robustness/test_camera_remount.py``,
-``io/test_estimates_bag.py``)."""
+``io/test_estimates_bag.py``), and a recorded two-camera run in a folder (``io/``'s bag
+and LCM tests)."""
 
 import numpy as np
 
@@ -17,3 +18,21 @@ def two_camera_config():
     config.cameras = [CameraMount("camera", "camera_optical"),
                       CameraMount("post", "post_nominal")]
     return config
+
+
+def recorded_two_cameras(folder, ticks_per_second: int):
+    """1.5 s of occlusion-lasting-2cam/constant, its stamps rounded to ``ticks_per_second``,
+    written to ``folder`` as ``run.npz``, ``robot.yaml`` (its robot) and ``params.yaml``
+    (the tests' small parameters); returns the run."""
+    from fast_params import small_params
+
+    from drake_tracker.params.loading import tracker_params_to_yaml
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario.load import load_scenario
+
+    run = simulate_and_record(load_scenario("occlusion-lasting-2cam/constant"),
+                              duration_s=1.5).stamped_in(ticks_per_second)
+    run.save(folder / "run.npz")
+    (folder / "robot.yaml").write_text(run.robot_config_yaml)
+    (folder / "params.yaml").write_text(tracker_params_to_yaml(small_params()))
+    return run

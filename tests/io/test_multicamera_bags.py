@@ -13,7 +13,6 @@ import pytest
 pytest.importorskip("rosbags")
 
 from cli_runs import assert_one_line_error, run_cli  # noqa: E402
-from fast_params import small_params  # noqa: E402
 from test_bag_truth import check_truth_under_tf  # noqa: E402
 from test_estimates_bag import (  # noqa: E402
     drake_hand_in_nominal,
@@ -23,12 +22,12 @@ from test_estimates_bag import (  # noqa: E402
     read_bag,
     transform_of,
 )
+from two_cameras import recorded_two_cameras  # noqa: E402
 
 from drake_tracker.io.bag_source import BagSource, BagTopics, CameraTopics  # noqa: E402
 from drake_tracker.io.estimates_out import read_estimates_csv  # noqa: E402
 from drake_tracker.io.replay import model_for_run  # noqa: E402
 from drake_tracker.io.run_bag import write_run_bag  # noqa: E402
-from drake_tracker.params.loading import tracker_params_to_yaml  # noqa: E402
 from drake_tracker.robot.model import camera_offset_transform  # noqa: E402
 
 DEPTH = ["--depth-topic", "camera=/camera/depth/image_raw",
@@ -39,16 +38,9 @@ DEPTH = ["--depth-topic", "camera=/camera/depth/image_raw",
 def recorded(tmp_path_factory):
     """1.5 s of a two-camera preset, stamped in ns, as a run, a bag, a robot file and
     the test's parameters."""
-    from drake_tracker.sim.record import simulate_and_record
-    from drake_tracker.sim.scenario.load import load_scenario
-
     folder = tmp_path_factory.mktemp("two_cameras")
-    run = simulate_and_record(load_scenario("occlusion-lasting-2cam/constant"),
-                              duration_s=1.5).stamped_in_nanoseconds()
-    run.save(folder / "run.npz")
+    run = recorded_two_cameras(folder, 10**9)
     write_run_bag(run, folder / "run.mcap")
-    (folder / "robot.yaml").write_text(run.robot_config_yaml)
-    (folder / "params.yaml").write_text(tracker_params_to_yaml(small_params()))
     return run, folder
 
 

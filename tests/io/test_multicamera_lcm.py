@@ -14,14 +14,13 @@ import pytest
 pytest.importorskip("lcm")
 
 from cli_runs import assert_one_line_error, run_cli  # noqa: E402
-from fast_params import small_params  # noqa: E402
+from two_cameras import recorded_two_cameras  # noqa: E402
 
 from drake_tracker.io.estimates_out import read_estimates_csv  # noqa: E402
 from drake_tracker.io.lcm_log import LcmCamera, LcmLogSource, read_log  # noqa: E402
 from drake_tracker.io.lcm_messages import camera_channel, camera_text  # noqa: E402
 from drake_tracker.io.replay import model_for_run  # noqa: E402
 from drake_tracker.io.run_lcm_log import image_channels, write_run_lcm_log  # noqa: E402
-from drake_tracker.params.loading import tracker_params_to_yaml  # noqa: E402
 
 CAMERAS = ("camera", "post_camera")
 
@@ -30,16 +29,9 @@ CAMERAS = ("camera", "post_camera")
 def recorded(tmp_path_factory):
     """1.5 s of a two-camera preset, stamped in µs, as a run, an LCM log, a robot file
     and the test's parameters."""
-    from drake_tracker.sim.record import simulate_and_record
-    from drake_tracker.sim.scenario.load import load_scenario
-
     folder = tmp_path_factory.mktemp("two_cameras_lcm")
-    run = simulate_and_record(load_scenario("occlusion-lasting-2cam/constant"),
-                              duration_s=1.5).stamped_in_microseconds()
-    run.save(folder / "run.npz")
+    run = recorded_two_cameras(folder, 10**6)
     write_run_lcm_log(run, folder / "run.lcmlog")
-    (folder / "robot.yaml").write_text(run.robot_config_yaml)
-    (folder / "params.yaml").write_text(tracker_params_to_yaml(small_params()))
     return run, folder
 
 
