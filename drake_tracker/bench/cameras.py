@@ -87,5 +87,7 @@ def format_camera_count(result: dict) -> str:
             f"({one['update_ms_median']:.1f} median, {one['updates']} updates), two "
             f"cameras at 15 Hz {two['update_ms_mean']:.1f} ms mean "
             f"({two['update_ms_median']:.1f} median, {two['updates']} updates)\n"
-            f"  two cameras / one camera: {result['two_over_one_per_image']:.2f} per image, "
-            f"{result['two_over_one_per_s']:.2f} per second of data   (target ~1)")
+            f"  two cameras / one camera: {result['two_over_one_per_image']:.2f} per image "
+            f"(target ~1); {result['two_over_one_per_s']:.2f} per second of data (each "
+            f"camera is paced at image.min_image_interval_s: {two['updates']} updates "
+            f"against {one['updates']})")
