@@ -2,7 +2,9 @@
 MCAP storage) or a single ``.mcap`` file, read with ``rosbags`` (the ``ros`` extra).
 
 * Topics are found by message type: ``sensor_msgs/JointState`` for the readings, a
-  ``sensor_msgs/Image`` for depth, ``sensor_msgs/CameraInfo`` for its intrinsics. Where a
+  ``sensor_msgs/Image`` for depth (or image_transport's ``compressedDepth``, a
+  ``sensor_msgs/CompressedImage`` on ``<image topic>/compressedDepth``:
+  ``io/compressed_depth.py``), ``sensor_msgs/CameraInfo`` for its intrinsics. Where a
   type has several topics, the error lists them and the flag that picks one.
 * Joints are matched by name: joints the model lacks are ignored; a model joint missing
   from the messages is an error (at the first message), or a skipped, counted message
@@ -34,6 +36,12 @@ import numpy as np
 
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.io.camera_sources import check_camera_sources
+from drake_tracker.io.compressed_depth import (
+    COMPRESSED_IMAGE,
+    TRANSPORT_SUFFIX,
+    base_image_topic,
+    depth_from_compressed,
+)
 from drake_tracker.io.ros_messages import depth_from_image, require_rosbags, stamp_ns
 from drake_tracker.io.stream import (
     Event,
@@ -99,7 +107,7 @@ def check_camera_topics(cameras: tuple[CameraTopics, ...],
 
 def info_topic_beside(reader: Any, depth_topic: str, camera: str) -> str:
     """The only CameraInfo topic in ``depth_topic``'s namespace (an error naming them)."""
-    namespace = depth_topic.rsplit("/", 1)[0] + "/"
+    namespace = base_image_topic(depth_topic).rsplit("/", 1)[0] + "/"
     candidates = sorted({c.topic for c in reader.connections if c.msgtype == CAMERA_INFO
                          and c.topic.startswith(namespace)})
     if len(candidates) != 1:
@@ -132,13 +140,33 @@ def pick_topic(reader: Any, msgtype: str, wanted: str | None, flag: str) -> str:
     listing the candidates)."""
     candidates = sorted({c.topic for c in reader.connections if c.msgtype == msgtype
                          and not c.topic.startswith(TRUTH_PREFIX)})
+    return _chosen(candidates, candidates, wanted, msgtype, flag)
+
+
+def pick_depth_topic(reader: Any, wanted: str | None, flag: str) -> str:
+    """The depth topic to read: ``wanted`` if given (a ``sensor_msgs/Image`` or a
+    ``sensor_msgs/CompressedImage`` topic of the bag), else the only ``Image`` topic or
+    ``compressedDepth`` topic outside ``TRUTH_PREFIX`` (a color camera's ``.../compressed``
+    topic is not a candidate)."""
+    ours = [c for c in reader.connections if not c.topic.startswith(TRUTH_PREFIX)]
+    allowed = sorted({c.topic for c in ours if c.msgtype in (IMAGE, COMPRESSED_IMAGE)})
+    candidates = sorted({c.topic for c in ours if c.msgtype == IMAGE or (
+        c.msgtype == COMPRESSED_IMAGE and c.topic.endswith(TRANSPORT_SUFFIX))})
+    return _chosen(candidates, allowed, wanted,
+                   f"depth ({IMAGE}, or {COMPRESSED_IMAGE} on .../compressedDepth)", flag)
+
+
+def _chosen(candidates: list[str], allowed: list[str], wanted: str | None, kind: str,
+            flag: str) -> str:
+    """``wanted`` if it is among ``allowed``, else the only one of ``candidates``;
+    ValueError naming the ``kind`` of topic and listing them otherwise."""
     if wanted is not None:
-        if wanted not in candidates:
-            raise ValueError(f"the bag has no {msgtype} topic '{wanted}'; its {msgtype} "
-                             f"topics: {candidates or 'none'}")
+        if wanted not in allowed:
+            raise ValueError(f"the bag has no {kind} topic '{wanted}'; its {kind} "
+                             f"topics: {allowed or 'none'}")
         return wanted
     if len(candidates) != 1:
-        raise ValueError(f"the bag has {len(candidates)} {msgtype} topics "
+        raise ValueError(f"the bag has {len(candidates)} {kind} topics "
                          f"({candidates or 'none'}): pick one with {flag}")
     return candidates[0]
 
@@ -179,11 +207,11 @@ class BagSource:
         self.joint_topic = pick_topic(r, JOINT_STATE, topics.joints, "--joint-topic")
         if topics.cameras:
             check_camera_topics(topics.cameras)
-            wanted = [(c.name, pick_topic(r, IMAGE, c.depth, "--depth-topic"),
+            wanted = [(c.name, pick_depth_topic(r, c.depth, "--depth-topic"),
                        c.camera_info or info_topic_beside(r, c.depth, c.name))
                       for c in topics.cameras]
         else:
-            wanted = [(None, pick_topic(r, IMAGE, topics.depth, "--depth-topic"),
+            wanted = [(None, pick_depth_topic(r, topics.depth, "--depth-topic"),
                        pick_topic(r, CAMERA_INFO, topics.camera_info,
                                   "--camera-info-topic"))]
         #: Each depth camera (name None: the bag's one camera of a one-camera call).
@@ -287,7 +315,9 @@ class BagSource:
                     yield ReadingEvent(t, position[columns])
                 else:
                     try:
-                        depth = depth_from_image(message)
+                        depth = (depth_from_compressed(message)
+                                 if connection.msgtype == COMPRESSED_IMAGE
+                                 else depth_from_image(message))
                     except ValueError as err:
                         yield SkippedMessage("depth images not usable",
                                              f"depth image at {t:.6f} s skipped: {err}")

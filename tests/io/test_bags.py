@@ -204,7 +204,7 @@ def test_bad_bags_are_named(apollo, tmp_path):
     distorted = _write(tmp_path / "distorted.mcap", [(*info, t0, _info(m, t0, [0.1, 0, 0, 0,
                                                                               0])),
                                                      ok_joint])
-    with pytest.raises(ValueError, match="the bag has 0 sensor_msgs/msg/Image"):
+    with pytest.raises(ValueError, match=r"the bag has 0 depth \(sensor_msgs/msg/Image"):
         BagSource(distorted, names)
     distorted_with_depth = _write(tmp_path / "distorted2.mcap", [
         (*info, t0, _info(m, t0, [0.1, 0, 0, 0, 0])), ok_joint,

@@ -168,7 +168,8 @@ def test_tracking_the_bag_gives_the_estimates_of_the_run(recorded, capsys):
       "--depth-topic", "/post_camera/depth/image_raw"], "name each camera"),
     ([*DEPTH, "--camera-info-topic", "side=/camera/depth/camera_info"],
      "no --depth-topic side=TOPIC"),
-    (["--depth-topic", "camera=/nowhere"], "no sensor_msgs/msg/Image topic '/nowhere'"),
+    (["--depth-topic", "camera=/nowhere"], "no depth (sensor_msgs/msg/Image, or "
+     "sensor_msgs/msg/CompressedImage on .../compressedDepth) topic '/nowhere'"),
 ])
 def test_bad_camera_topics_are_one_line_errors(recorded, capsys, flags, fragment):
     _, folder = recorded
