@@ -175,3 +175,19 @@ def test_only_the_coarse_sweeps_score_the_coarse_image_and_not_while_acquiring(a
     assert (fine.scored, coarse.scored) == (per_sweep, 3 * per_sweep)
     update(prior, observation, np.random.default_rng(0), coarse_sweeps=False)
     assert (fine.scored, coarse.scored) == (5 * per_sweep, 3 * per_sweep)
+
+
+def test_a_width_wider_than_the_camera_is_warned_and_the_camera_kept(apollo, caplog):
+    """Images are only subsampled: asked for 160 px of an 80 x 60 camera (a recording
+    stores its working size), the update tracks at 80 px and says so."""
+    camera = CameraIntrinsics.from_fov(80, 60, np.radians(45.0))
+    blocks = [np.array([i]) for i in range(apollo.num_joints)]
+    with caplog.at_level("WARNING", logger="drake_tracker.core.cpf.image_update"):
+        update = CpfImageUpdate(apollo, camera, blocks, 4, TrackerParams().image.likelihood,
+                                160)
+    assert (update.intrinsics.width, update.intrinsics.height) == (80, 60)
+    assert "image_width_px = 160 is wider than the camera's 80 x 60" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="drake_tracker.core.cpf.image_update"):
+        CpfImageUpdate(apollo, camera, blocks, 4, TrackerParams().image.likelihood, 80)
+    assert "wider" not in caplog.text

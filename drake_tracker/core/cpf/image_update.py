@@ -9,6 +9,7 @@ recombination with p(b | a) (eq. 16) happens in the belief buffer.
 
 from __future__ import annotations
 
+import logging
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -35,6 +36,8 @@ if TYPE_CHECKING:
 
     from drake_tracker.core.render.backends import RenderThenScore
     from drake_tracker.robot.model import TrackerModel
+
+log = logging.getLogger(__name__)
 
 #: How many per-update wall times ``StageTimes`` keeps.
 RECENT_UPDATES = 10_000
@@ -106,6 +109,12 @@ class CpfImageUpdate:
         self.model = model
         self.camera = camera
         self.stride = stride_for_width(camera.width, image_width_px)
+        if image_width_px > camera.width:
+            # Images are only ever subsampled: a camera narrower than the width asked for
+            # is tracked at its own (a recording stores the images at its working size).
+            log.warning("image.image_width_px = %d is wider than the camera's %d x %d "
+                        "images: tracking at %d px", image_width_px, camera.width,
+                        camera.height, camera.width)
         self.intrinsics = camera.subsampled(self.stride)
         self.blocks = [np.asarray(b, int) for b in blocks]
         self.num_particles = int(num_particles)
