@@ -3,8 +3,9 @@
 
 The messages are built here as the plugin builds them (its documented layout: a 12-byte
 header of int32 format and float32 A, B, then a PNG from Pillow; for 32FC1 the
-quantised inverse depth v = A / d + B, truncated to uint16). A bag rewritten with its
-depth in that form, raw 16UC1 beside it, is tracked to the same estimates as the raw one.
+quantised inverse depth v = A / d + B, truncated to uint16), and as the plain
+``compressed`` plugin writes a 16-bit image (a bare PNG). A bag rewritten with its depth
+in that form is tracked to the same estimates as its raw 16UC1 twin.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ pytest.importorskip("rosbags")
 from fast_params import small_params as fast_params  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from drake_tracker.io.bag_source import BagSource  # noqa: E402
+from drake_tracker.io.bag_source import BagSource, BagTopics  # noqa: E402
 from drake_tracker.io.compressed_depth import (  # noqa: E402
     base_image_topic,
     depth_from_compressed,
@@ -70,6 +71,16 @@ def test_millimetres_decode_exactly_in_every_format_spelling():
         np.testing.assert_array_equal(depth, mm)
 
 
+def test_the_plain_compressed_plugins_png_is_millimetres():
+    """image_transport's ``compressed`` plugin writes a 16-bit image as a bare PNG (no
+    header)."""
+    mm = np.array([[0, 7, 1234], [4000, 0, 65535]], np.uint16)
+    message = M.types[COMPRESSED](header=M.header(0, "cam"),
+                                  format="16UC1; png compressed mono16",
+                                  data=np.frombuffer(png16(mm), np.uint8).copy())
+    np.testing.assert_array_equal(depth_from_compressed(message), mm)
+
+
 def test_inverse_depth_decodes_within_its_quantisation():
     """One quantisation step of v is a depth step of d^2 / A at depth d (0.4 mm at 2 m
     with the plugin's defaults): the decoded depth lies within one step of the truth;
@@ -90,8 +101,9 @@ def test_bad_messages_are_named():
     mm = np.ones((2, 3), np.uint16)
     cases = [
         (millimetres_message(0, mm, "16UC1; compressedDepth rvl"), "codec 'rvl' is not read"),
-        (millimetres_message(0, mm, "png"), "is not image_transport's compressedDepth"),
-        (millimetres_message(0, mm, "rgb8; compressed jpeg"), "not image_transport's"),
+        (millimetres_message(0, mm, "png"), "is not depth"),
+        (millimetres_message(0, mm, "rgb8; jpeg compressed bgr8"), "JPEG, which is lossy"),
+        (millimetres_message(0, mm, "32FC1; png compressed"), "is not depth"),
         (millimetres_message(0, mm, "rgb8; compressedDepth png"), "'rgb8' is not a depth"),
         (compressed(0, "16UC1; compressedDepth png", b""), "does not hold"),
         (compressed(0, "16UC1; compressedDepth png", png16(mm)[:20]), "cannot be decoded"),
@@ -108,6 +120,7 @@ def test_bad_messages_are_named():
 
 def test_base_image_topic():
     assert base_image_topic("/cam/depth/image_raw/compressedDepth") == "/cam/depth/image_raw"
+    assert base_image_topic("/cam/depth/image_raw/compressed") == "/cam/depth/image_raw"
     assert base_image_topic("/cam/depth/image_raw") == "/cam/depth/image_raw"
 
 
@@ -166,6 +179,19 @@ def test_a_compressed_depth_bag_tracks_as_its_raw_twin(apollo, tmp_path):
     expected = [_mm(d) for d in run.depth_images_m]
     assert len(images) == len(expected) > 5
     for got, want in zip(images, expected):
+        np.testing.assert_array_equal(got, want)
+    # The plain compressed plugin's PNG shares its topic's last name with the colour
+    # camera's: read only when named.
+    plain_png = _rewrite(plain, tmp_path / "png.mcap", lambda stamp, metres: (
+        topic + "/compressed", COMPRESSED, M.types[COMPRESSED](
+            header=M.header(stamp, "cam"), format="16UC1; png compressed mono16",
+            data=np.frombuffer(png16(_mm(metres)), np.uint8).copy())))
+    with pytest.raises(ValueError, match="the bag has 0 depth"):
+        BagSource(plain_png, names)
+    named = BagSource(plain_png, names, BagTopics(depth=topic + "/compressed"))
+    assert named.camera_info_topic == "/camera/depth/camera_info"
+    for got, want in zip([e.depth for e in named.events() if isinstance(e, ImageEvent)],
+                         expected, strict=True):
         np.testing.assert_array_equal(got, want)
     params = fast_params()
     a = track_bag(BagSource(raw, names), apollo, params, tmp_path / "a", progress=False)
