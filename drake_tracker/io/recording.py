@@ -201,10 +201,6 @@ class RecordedRun:
                             ", ".join(str(i) for i in bad[:5]) + (" ..." if len(bad) > 5
                                                                   else ""))
 
-    def images_in_arrival_order(self) -> tuple[np.ndarray, np.ndarray]:
-        """The first camera's :meth:`CameraImages.arrival_order`."""
-        return self.cameras[0].arrival_order()
-
     def stamped_in(self, ticks_per_second: int) -> RecordedRun:
         """This run with every stamp rounded to the nearest tick of a clock with
         ``ticks_per_second`` ticks (an integer), as real sensors stamp: the nearest float

@@ -65,7 +65,7 @@ def test_the_bag_holds_the_run(run, bag, apollo):
     np.testing.assert_array_equal([r.time_s for r in readings],
                                   run.reading_times_s - run.reading_times_s[0])
     np.testing.assert_array_equal(np.stack([r.positions for r in readings]), run.readings_rad)
-    order, _ = run.images_in_arrival_order()
+    order, _ = run.cameras[0].arrival_order()
     for image, i in zip(images, order):
         np.testing.assert_array_equal(image.depth, run.depth_images_m[i].astype(np.float32))
     times, X = source.truth_X_CE()

@@ -78,7 +78,7 @@ def test_the_log_holds_the_run(run, log, apollo):
     np.testing.assert_array_equal([r.time_s for r in readings],
                                   run.reading_times_s - run.reading_times_s[0])
     np.testing.assert_array_equal(np.stack([r.positions for r in readings]), run.readings_rad)
-    order, _ = run.images_in_arrival_order()
+    order, _ = run.cameras[0].arrival_order()
     for image, i in zip(images, order):
         assert image.capture_s == run.image_capture_times_s[i]
         assert image.arrival_s == run.image_arrival_times_s[i]
@@ -92,7 +92,7 @@ def test_compressed_and_millimetre_depth_read_back_as_written(run, apollo, tmp_p
     write_run_lcm_log(run, path, depth_type=depth_type, compress=True)
     source = LcmLogSource(path, apollo.robot_joint_names, run.camera_intrinsics)
     _, images = _split(source.events())
-    order, _ = run.images_in_arrival_order()
+    order, _ = run.cameras[0].arrival_order()
     for image, i in zip(images, order, strict=True):
         written = np.asarray(run.depth_images_m[i], np.float32)
         if depth_type == "uint16":
