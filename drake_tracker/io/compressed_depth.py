@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from drake_tracker.io.ros_messages import DEPTH_ENCODINGS
+
 #: The ``sensor_msgs`` type of a compressed image.
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 #: The last name of the topic ``image_transport`` publishes compressed depth on.
@@ -35,8 +37,8 @@ TRANSPORT_SUFFIX = "/compressedDepth"
 #: int32 compression format, float32 A and B (little-endian, as the writers' x86 and ARM).
 HEADER = struct.Struct("<iff")
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-_MILLIMETRES = ("16UC1", "mono16")
-_METRES = "32FC1"
+#: The depth encodings in millimetres; the other, ``32FC1``, is in metres.
+_MILLIMETRES = tuple(e for e in DEPTH_ENCODINGS if e != "32FC1")
 
 
 def base_image_topic(topic: str) -> str:
@@ -56,12 +58,11 @@ def compressed_depth_format(format_field: str) -> tuple[str, str]:
     that is neither, a codec that is not read, or an encoding that is not depth."""
     encoding, _, transport = (part.strip() for part in str(format_field).partition(";"))
     words = transport.split()
-    depth = _MILLIMETRES + (_METRES,)
     if words[:1] == ["compressedDepth"] and len(words) <= 2:
         codec = words[1] if len(words) == 2 else "png"
-        if encoding not in depth:
+        if encoding not in DEPTH_ENCODINGS:
             raise ValueError(f"compressedDepth encoding '{encoding}' is not a depth encoding "
-                             f"(expected one of {', '.join(depth)})")
+                             f"(expected one of {', '.join(DEPTH_ENCODINGS)})")
         if codec != "png":
             raise ValueError(f"compressedDepth codec '{codec}' is not read (only png): "
                              f"republish the topic raw (ros2 run image_transport republish "
