@@ -223,14 +223,12 @@ def _parse(args) -> list[Task]:
         from drake_tracker.params.loading import load_tracker_params, tracker_params_to_yaml
 
         params_yaml = tracker_params_to_yaml(load_tracker_params(args.params))
-    tasks = make_tasks(args.quick, args.seeds, methods, params_yaml, args.duration)
-    if args.sequences:
-        wanted = args.sequences.split(",")
-        known = sorted({t.sequence for t in tasks})
-        for name in wanted:
-            if name not in known:
-                raise SystemExit(f"unknown sequence '{name}' for this mode; known: {known}")
-        tasks = [t for t in tasks if t.sequence in wanted]
+    wanted = tuple(args.sequences.split(",")) if args.sequences else None
+    try:
+        tasks = make_tasks(args.quick, args.seeds, methods, params_yaml, args.duration,
+                           sequences=wanted)
+    except ValueError as e:
+        raise SystemExit(str(e)) from None
     return tasks
 
 

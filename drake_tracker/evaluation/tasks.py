@@ -116,21 +116,36 @@ class Task:
 
 
 def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...],
-               params_yaml: str = "", duration_s: float | None = None) -> list[Task]:
+               params_yaml: str = "", duration_s: float | None = None,
+               sequences: tuple[str, ...] | None = None) -> list[Task]:
     """The protocol's tasks: the quick suite (``QUICK_SEQUENCES``, 10 s, 3 seeds) or the
     full one (12 sequences at their preset durations, 10 seeds), × the bias variants.
-    ``duration_s`` shortens every run (a slice for cost measurements and tests)."""
-    from drake_tracker.sim.scenario.load import SEQUENCES
+    ``duration_s`` shortens every run (a slice for cost measurements and tests).
+    ``sequences`` keeps only those; in the full mode it may also name the presets beyond
+    the paper's (``EXTRA_SEQUENCES``: heavy and lasting occlusion, the mismatched world,
+    the two-camera sequences), each run at its preset duration with the three biases.
+    An unknown name raises ValueError listing the known ones."""
+    from drake_tracker.sim.scenario.load import ALL_SEQUENCES, SEQUENCES
 
     if quick:
-        sequences, duration, num_seeds = QUICK_SEQUENCES, QUICK_DURATION_S, seeds or QUICK_SEEDS
+        sequences_run, duration, num_seeds = (QUICK_SEQUENCES, QUICK_DURATION_S,
+                                              seeds or QUICK_SEEDS)
     else:
-        sequences, duration, num_seeds = SEQUENCES, None, seeds or FULL_SEEDS
+        sequences_run, duration, num_seeds = SEQUENCES, None, seeds or FULL_SEEDS
     if duration_s is not None:
         duration = duration_s
-    cases = [(seq, bias) for seq in sequences for bias in BIASES]
+    cases = [(seq, bias) for seq in sequences_run for bias in BIASES]
     if quick:
         cases += list(QUICK_EXTRA_CASES)
+    if sequences is not None:
+        known = sorted({seq for seq, _ in cases} | (set() if quick else set(ALL_SEQUENCES)))
+        for name in sequences:
+            if name not in known:
+                raise ValueError(f"unknown sequence '{name}' for this mode; known: {known}")
+        cases = [(seq, bias) for seq, bias in cases if seq in sequences]
+        if not quick:
+            cases += [(seq, bias) for seq in sequences if seq not in SEQUENCES
+                      for bias in BIASES]
     return [Task(seq, bias, seed, duration, QUICK_IMAGE_INTERVAL_S, methods, params_yaml)
             for seq, bias in cases for seed in range(num_seeds)]
 

@@ -50,6 +50,23 @@ def test_task_lists_cover_the_protocol():
     assert tr.excursion_start_s + 2 * tr.excursion_ramp_s < scenario.duration_s
 
 
+def test_the_full_mode_runs_a_named_extra_preset_at_its_own_length():
+    tasks = make_tasks(False, 2, ("full_fusion",),
+                       sequences=("in-out-in-2cam", "occlusion-lasting-2cam", "arm"))
+    cases = {(t.sequence, t.bias) for t in tasks}
+    assert cases == {(q, b) for q in ("in-out-in-2cam", "occlusion-lasting-2cam", "arm")
+                     for b in ("none", "constant", "time-varying")}
+    assert len(tasks) == 9 * 2 and {t.duration_s for t in tasks} == {None}
+    lengths = {t.sequence: t.scenario().duration_s for t in tasks}
+    assert lengths == {"in-out-in-2cam": 60.0, "occlusion-lasting-2cam": 30.0, "arm": 60.0}
+    assert len(next(t for t in tasks if t.sequence == "in-out-in-2cam").scenario().cameras) == 2
+    # The quick mode keeps its own cases: a two-camera cell, not every bias of it.
+    quick = make_tasks(True, 1, ("full_fusion",), sequences=("occlusion-lasting-2cam",))
+    assert [(t.sequence, t.bias) for t in quick] == [("occlusion-lasting-2cam", "constant")]
+    with pytest.raises(ValueError, match="unknown sequence 'nope' for this mode"):
+        make_tasks(True, 1, ("full_fusion",), sequences=("in-out-in-2cam", "nope"))
+
+
 def test_evaluate_run_orders_the_methods_on_a_biased_run():
     model = build_tracker_model(robot_preset("apollo"))
     run = synthetic_run(model, duration_s=2.0, bias_rad=np.radians(3.0), seed=1)
