@@ -22,6 +22,7 @@ import numpy as np
 
 from drake_tracker.core.cameras import (
     CameraChannel,
+    another_camera_tracks,
     best_health,
     camera_channels,
     camera_named,
@@ -205,7 +206,8 @@ class Tracker:
         channel.lag_s = lag
         health = channel.health
         outcome = channel.images.observe(frame, anchor.prior,
-                                         channel.pacing.jump_window_s(t, health), health)
+                                         channel.pacing.jump_window_s(t, health), health,
+                                         another_camera_tracks(self.channels, channel.name))
         channel.pacing = channel.pacing.taken_up(t, self.params.image.min_image_interval_s)
         self.last_result = outcome.result
         verdict = conclude_image(outcome, health, self.params.health)

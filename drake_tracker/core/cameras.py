@@ -9,6 +9,7 @@ step (``core/image_step.py``) into the one delay buffer, at their own times.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
@@ -111,3 +112,13 @@ def best_health(channels: dict[str, CameraChannel]) -> TrackerHealth:
         return first.health
     best = min(channels.values(), key=lambda c: int(c.health.state)).health
     return replace(best, state=max(best.state, HealthState.UNCERTAIN))
+
+
+def another_camera_tracks(channels: Mapping[str, CameraChannel | TrackerHealth],
+                          name: str) -> bool:
+    """Whether a camera other than ``name`` says ``tracking`` (its images confirm the
+    arm): an image of camera ``name`` that shows most of the arm hidden is then not
+    applied (``ImageProcessor.observe``'s ``others_track``). ``channels`` maps each
+    camera's name to its channel, or to its health."""
+    return any(getattr(c, "health", c).state == HealthState.TRACKING
+               for n, c in channels.items() if n != name)

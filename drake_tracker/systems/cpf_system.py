@@ -10,7 +10,11 @@ from typing import TYPE_CHECKING
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
 
-from drake_tracker.core.cameras import camera_named, clock_disagreement
+from drake_tracker.core.cameras import (
+    another_camera_tracks,
+    camera_named,
+    clock_disagreement,
+)
 from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.image_step import conclude_image
 from drake_tracker.core.robustness.health import TrackerHealth
@@ -253,7 +257,8 @@ class CpfImageUpdateSystem(LeafSystem):
         cam = replace(cam, pacing=cam.pacing.taken_up(t, self._params.image.min_image_interval_s),
                       lag_s=frame.arrival_time_s - t)
         s.cameras[name] = cam
-        args = (frame, prior.anchor.prior, cam.pacing.jump_window_s(t, cam.health), cam.health)
+        args = (frame, prior.anchor.prior, cam.pacing.jump_window_s(t, cam.health), cam.health,
+                another_camera_tracks(s.cameras, name))
         observe = self.processors[name].observe
         if self._latency_s > 0:
             outcome = submit_image_update(observe, *args)

@@ -110,3 +110,44 @@ def test_a_camera_whose_pose_drifted_is_searched_again_with_the_held_arm_kept(ca
         others = sorted(set(range(model.num_joints)) - own)
         assert sorted(out.observation.restart.untouched.tolist()) == others
         np.testing.assert_array_equal(out.result.mean[others], prior[MEAN_A, others])
+
+
+def test_an_image_that_hides_most_of_the_arm_is_skipped_while_another_camera_tracks_it():
+    """One of several cameras sees a plate hide most of the arm where the estimate puts
+    it (the true arm behind it): while another camera tracks the arm, the image is not
+    applied (its few unhidden pixels would pin this camera's own pose); while none
+    does, it is, as the images of a camera alone are."""
+    from drake_tracker.core.cameras import another_camera_tracks
+    from drake_tracker.core.filter.kalman import initial_moments
+    from drake_tracker.core.image_processor import ImageProcessor
+    from drake_tracker.core.robustness.health import HealthState, TrackerHealth
+
+    model = build_tracker_model(two_camera_config())
+    params = seeded_params()
+    params.use_joint_readings = False
+    resolved = resolve_tracker_params(params, model)
+    post = ImageProcessor(model, CAMERA, resolved, camera_name="post")
+    truth = np.zeros(model.num_joints)
+    for name, angle in {"arm_joint_1": 0.35, "arm_joint_2": 1.05, "arm_joint_4": -1.05,
+                        "arm_joint_6": -0.5, "head_tilt": 0.56}.items():
+        truth[model.joint_names.index(name)] = angle
+    arm = post.update.renderer.render(truth[None])[0]
+    rows = np.flatnonzero(np.isfinite(arm).any(axis=1))
+    cut = rows[int(0.7 * len(rows))]  # the plate hides the arm's rows above this one
+    plate = np.where(np.isfinite(arm), arm, 3.0)
+    plate[:cut][np.isfinite(arm[:cut])] = 0.5
+    plate = plate.astype(np.float32)
+    prior = initial_moments(truth, resolved.joints.initial_angle_std,
+                            resolved.joints.initial_bias_std, resolved.joints.has_bias)
+    held = post.observe(DepthFrame(0.0, 0.01, plate, 0), prior, others_track=True)
+    seen = held.consistency
+    assert seen.occluded > 0.5 and seen.visible_robot_pixels >= params.health.min_robot_pixels
+    assert held.observation is None and not held.restarted
+    assert "hidden" in held.skip_reason and "other cameras hold the arm" in held.skip_reason
+    alone = post.observe(DepthFrame(0.0, 0.01, plate, 0), prior, others_track=False)
+    assert alone.observation is not None and alone.skip_reason == ""
+    # Which cameras count: any other that says tracking, never the camera itself.
+    healths = {"camera": TrackerHealth(HealthState.UNCERTAIN),
+               "post": TrackerHealth(HealthState.TRACKING)}
+    assert another_camera_tracks(healths, "camera")
+    assert not another_camera_tracks(healths, "post")
