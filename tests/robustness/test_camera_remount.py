@@ -14,6 +14,25 @@ from drake_tracker.params.resolve import resolve_tracker_params
 from drake_tracker.robot.model import build_tracker_model
 
 
+def _post_camera_on_the_arm(min_robot_pixels: int | None = None):
+    """The post camera of two (no restart from the encoders' arm: its own decisions
+    alone), the arm's true configuration, and the arm rendered from it (inf: none)."""
+    from drake_tracker.core.image_processor import ImageProcessor
+
+    model = build_tracker_model(two_camera_config())
+    params = seeded_params()
+    if min_robot_pixels is not None:
+        params.health.min_robot_pixels = min_robot_pixels
+    params.use_joint_readings = False
+    resolved = resolve_tracker_params(params, model)
+    post = ImageProcessor(model, CAMERA, resolved, camera_name="post")
+    truth = np.zeros(model.num_joints)
+    for name, angle in {"arm_joint_1": 0.35, "arm_joint_2": 1.05, "arm_joint_4": -1.05,
+                        "arm_joint_6": -0.5, "head_tilt": 0.56}.items():
+        truth[model.joint_names.index(name)] = angle
+    return model, resolved, post, truth, post.update.renderer.render(truth[None])[0]
+
+
 def test_a_camera_whose_pose_hides_the_arm_it_sees_restarts_its_own_pose_only():
     """One of several cameras whose estimated pose is 10-20 cm behind its true one sees
     the arm nearer than the estimate puts it: all but a few of its pixels read as hidden,
@@ -22,19 +41,8 @@ def test_a_camera_whose_pose_hides_the_arm_it_sees_restarts_its_own_pose_only():
     camera's joints are kept) and the image is applied; a plate in front of the arm,
     which hides the arm from the nominal mount too, is still skipped."""
     from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B, initial_moments
-    from drake_tracker.core.image_processor import ImageProcessor
 
-    model = build_tracker_model(two_camera_config())
-    params = seeded_params()
-    params.health.min_robot_pixels = 100
-    params.use_joint_readings = False  # no restart from the encoders' arm: this one alone
-    resolved = resolve_tracker_params(params, model)
-    post = ImageProcessor(model, CAMERA, resolved, camera_name="post")
-    truth = np.zeros(model.num_joints)
-    for name, angle in {"arm_joint_1": 0.35, "arm_joint_2": 1.05, "arm_joint_4": -1.05,
-                        "arm_joint_6": -0.5, "head_tilt": 0.56}.items():
-        truth[model.joint_names.index(name)] = angle
-    arm = post.update.renderer.render(truth[None])[0]
+    model, resolved, post, truth, arm = _post_camera_on_the_arm(min_robot_pixels=100)
     image = np.where(np.isfinite(arm), arm, 3.0).astype(np.float32)
     plate = np.where(np.isfinite(arm), 0.5, 3.0).astype(np.float32)
     z = model.joint_names.index("post_offset_z")
@@ -119,19 +127,9 @@ def test_an_image_that_hides_most_of_the_arm_is_skipped_while_another_camera_tra
     does, it is, as the images of a camera alone are."""
     from drake_tracker.core.cameras import another_camera_tracks
     from drake_tracker.core.filter.kalman import initial_moments
-    from drake_tracker.core.image_processor import ImageProcessor
     from drake_tracker.core.robustness.health import HealthState, TrackerHealth
 
-    model = build_tracker_model(two_camera_config())
-    params = seeded_params()
-    params.use_joint_readings = False
-    resolved = resolve_tracker_params(params, model)
-    post = ImageProcessor(model, CAMERA, resolved, camera_name="post")
-    truth = np.zeros(model.num_joints)
-    for name, angle in {"arm_joint_1": 0.35, "arm_joint_2": 1.05, "arm_joint_4": -1.05,
-                        "arm_joint_6": -0.5, "head_tilt": 0.56}.items():
-        truth[model.joint_names.index(name)] = angle
-    arm = post.update.renderer.render(truth[None])[0]
+    model, resolved, post, truth, arm = _post_camera_on_the_arm()
     rows = np.flatnonzero(np.isfinite(arm).any(axis=1))
     cut = rows[int(0.7 * len(rows))]  # the plate hides the arm's rows above this one
     plate = np.where(np.isfinite(arm), arm, 3.0)
@@ -141,7 +139,7 @@ def test_an_image_that_hides_most_of_the_arm_is_skipped_while_another_camera_tra
                             resolved.joints.initial_bias_std, resolved.joints.has_bias)
     held = post.observe(DepthFrame(0.0, 0.01, plate, 0), prior, others_track=True)
     seen = held.consistency
-    assert seen.occluded > 0.5 and seen.visible_robot_pixels >= params.health.min_robot_pixels
+    assert seen.occluded > 0.5 and seen.visible_robot_pixels >= resolved.health.min_robot_pixels
     assert held.observation is None and not held.restarted
     assert "hidden" in held.skip_reason and "other cameras hold the arm" in held.skip_reason
     alone = post.observe(DepthFrame(0.0, 0.01, plate, 0), prior, others_track=False)
