@@ -207,7 +207,9 @@ class Tracker:
         health = channel.health
         outcome = channel.images.observe(frame, anchor.prior,
                                          channel.pacing.jump_window_s(t, health), health,
-                                         another_camera_tracks(self.channels, channel.name))
+                                         another_camera_tracks(
+                                             {n: c.health for n, c in self.channels.items()},
+                                             channel.name))
         channel.pacing = channel.pacing.taken_up(t, self.params.image.min_image_interval_s)
         self.last_result = outcome.result
         verdict = conclude_image(outcome, health, self.params.health)

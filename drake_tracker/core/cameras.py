@@ -114,11 +114,10 @@ def best_health(channels: dict[str, CameraChannel]) -> TrackerHealth:
     return replace(best, state=max(best.state, HealthState.UNCERTAIN))
 
 
-def another_camera_tracks(channels: Mapping[str, CameraChannel | TrackerHealth],
-                          name: str) -> bool:
+def another_camera_tracks(healths: Mapping[str, TrackerHealth], name: str) -> bool:
     """Whether a camera other than ``name`` says ``tracking`` (its images confirm the
-    arm): an image of camera ``name`` that shows most of the arm hidden is then not
-    applied (``ImageProcessor.observe``'s ``others_track``). ``channels`` maps each
-    camera's name to its channel, or to its health."""
-    return any(getattr(c, "health", c).state == HealthState.TRACKING
-               for n, c in channels.items() if n != name)
+    arm), given each camera's health by name: an image of camera ``name`` that shows
+    most of the arm hidden is then not applied (``ImageProcessor.observe``'s
+    ``others_track``)."""
+    return any(health.state == HealthState.TRACKING
+               for other, health in healths.items() if other != name)

@@ -138,7 +138,7 @@ def make_tasks(quick: bool, seeds: int | None, methods: tuple[str, ...],
     if quick:
         cases += list(QUICK_EXTRA_CASES)
     if sequences is not None:
-        known = sorted({seq for seq, _ in cases} | (set() if quick else set(ALL_SEQUENCES)))
+        known = sorted({seq for seq, _ in cases} if quick else ALL_SEQUENCES)
         for name in sequences:
             if name not in known:
                 raise ValueError(f"unknown sequence '{name}' for this mode; known: {known}")

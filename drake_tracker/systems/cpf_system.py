@@ -258,7 +258,7 @@ class CpfImageUpdateSystem(LeafSystem):
                       lag_s=frame.arrival_time_s - t)
         s.cameras[name] = cam
         args = (frame, prior.anchor.prior, cam.pacing.jump_window_s(t, cam.health), cam.health,
-                another_camera_tracks(s.cameras, name))
+                another_camera_tracks({n: c.health for n, c in s.cameras.items()}, name))
         observe = self.processors[name].observe
         if self._latency_s > 0:
             outcome = submit_image_update(observe, *args)
