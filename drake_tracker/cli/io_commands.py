@@ -1,4 +1,4 @@
-"""``drake-tracker record`` and ``drake-tracker track``: data in and out."""
+"""``drake-tracker record``, ``track`` and ``calibrate-cameras``: data in and out."""
 
 from __future__ import annotations
 
@@ -157,6 +157,60 @@ def add_track(sub: argparse._SubParsersAction) -> None:
         if args.params:
             check_params_for_model(params, model, f"parameter file '{args.params}'")
         return run_track(args, run=recorded, params=params, model=model)
+
+    p.set_defaults(func=run)
+
+
+def add_calibrate(sub: argparse._SubParsersAction) -> None:
+    """The ``calibrate-cameras`` subcommand."""
+    p = sub.add_parser(
+        "calibrate-cameras", help="each camera's mounting error from a recorded run of "
+                                  "several cameras",
+        description="Fits every camera's six offsets (its mounting error) to the images of "
+                    "all cameras in a window where they see the arm, together: the tracker "
+                    "replays the run to the window's end and its estimate starts the fit "
+                    "(drake_tracker/io/calibrate_run.py). Writes the tracker parameters "
+                    "'camera_offsets', held ('estimate_camera_offset: false'), for "
+                    "--params of later runs of the same cell (see "
+                    "docs/guides/several_cameras.md).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="example:\n  drake-tracker record --scenario in-out-in-2cam/none --duration 3 "
+               "--out out/cal.npz\n  drake-tracker calibrate-cameras --run out/cal.npz "
+               "--out out/cameras.yaml\n  drake-tracker track --run out/run.npz "
+               "--params out/cameras.yaml")
+    p.add_argument("--run", required=True, metavar="FILE.npz",
+                   help="recorded run of several cameras, written by 'drake-tracker record'")
+    p.add_argument("--out", required=True, metavar="FILE.yaml",
+                   help="the tracker parameters to write (camera_offsets)")
+    p.add_argument("--from", dest="start_s", type=float, default=0.5, metavar="SECONDS",
+                   help="the window's start, run time (default: 0.5)")
+    p.add_argument("--to", dest="end_s", type=positive_seconds, default=2.5,
+                   metavar="SECONDS", help="the window's end (default: 2.5)")
+    p.add_argument("--images-per-camera", type=positive_int, default=10,
+                   help="images of each camera the fit scores, spread over the window "
+                        "(default: 10)")
+    p.add_argument("--evaluations", type=positive_int, default=8000,
+                   help="the fit's evaluations of the window's likelihood (default: 8000)")
+    p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
+
+    def run(args):
+        params = load_params_arg(args.params)
+        out = check_new_file(args.out, ".yaml")
+        recorded = load_run_arg(args.run)
+        from drake_tracker.io.calibrate_run import calibrate_cameras
+
+        try:
+            result = calibrate_cameras(recorded, params, start_s=args.start_s,
+                                       end_s=args.end_s,
+                                       images_per_camera=args.images_per_camera,
+                                       evaluations=args.evaluations)
+        except ValueError as err:
+            raise UsageError(f"'{args.run}': {err}") from None
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(result.params_yaml())
+        print(result.params_yaml(), end="")
+        print(f"wrote {out}")
+        return 0
 
     p.set_defaults(func=run)
 

@@ -23,7 +23,7 @@ from drake_tracker.cli.args import (
     positive_seconds,
     resolve_scenario,
 )
-from drake_tracker.cli.io_commands import add_record, add_track
+from drake_tracker.cli.io_commands import add_calibrate, add_record, add_track
 
 DESCRIPTION = """\
 Track a robot arm from its joint encoders and a depth camera, on Drake.
@@ -306,7 +306,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=_CommandParser)
-    for add in (_add_demo, add_record, add_track, _add_bench, _add_evaluate,
+    for add in (_add_demo, add_record, add_track, add_calibrate, _add_bench, _add_evaluate,
                 _add_compare, _add_scenarios, _add_params, _add_servo):
         add(sub)
     return parser

@@ -30,7 +30,10 @@ class JointArrays:
     ``bias_process_std`` keeps each joint's own σb (rad/√s) for the plausibility of
     a bias. ``jump_rate_per_s`` is 0 where a joint's bias cannot jump (no bias, or in
     a camera's kinematic chain).
-    ``initial_mean`` holds ``initial_positions_rad`` (0 elsewhere).
+    ``initial_mean`` holds ``initial_positions_rad`` (a calibrated camera's offsets on
+    its virtual joints, 0 elsewhere). ``virtual_reading`` is what each virtual joint
+    reads: a calibrated camera's offsets (``camera_offsets``), 0 elsewhere (the nominal
+    mount); the robot joints' entries are 0 (their encoders read them).
     """
 
     names: tuple[str, ...]
@@ -48,6 +51,7 @@ class JointArrays:
     robot: np.ndarray
     #: Indices of the robot joints (the encoder readings' order) within ``names``.
     robot_indices: np.ndarray
+    virtual_reading: np.ndarray
 
 
 @dataclass(frozen=True)

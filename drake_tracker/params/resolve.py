@@ -49,7 +49,8 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
     unknown = sorted(set(params.initial_positions_rad) - set(names))
     if unknown:
         raise ValueError(f"initial_positions_rad: unknown joint names {unknown}")
-    mean = np.zeros(len(names))
+    reading = camera_offset_readings(params, model)
+    mean = reading.copy()
     for name, value in params.initial_positions_rad.items():
         mean[names.index(name)] = value
 
@@ -78,6 +79,7 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
         initial_bias_std=column("initial_bias_std_rad"),
         robot=np.isin(names, model.robot_joint_names),
         robot_indices=model.robot_joint_indices,
+        virtual_reading=reading,
     )
     return ResolvedParams(
         joints=joints,
@@ -93,6 +95,21 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
         buffer_horizon_s=float(params.buffer_horizon_s),
         max_interpolation_gap_s=float(params.max_interpolation_gap_s),
     )
+
+
+def camera_offset_readings(params: TrackerParams, model: TrackerModel) -> np.ndarray:
+    """(n,) each joint's reading besides the encoders': ``params.camera_offsets`` on each
+    calibrated camera's six virtual joints, 0 elsewhere. ValueError for a camera the
+    model does not have."""
+    cameras = [c.name for c in model.cameras]
+    unknown = sorted(set(params.camera_offsets) - set(cameras))
+    if unknown:
+        raise ValueError(f"camera_offsets: unknown cameras {unknown}; the model's cameras "
+                         f"are {cameras}")
+    reading = np.zeros(model.num_joints)
+    for name, offsets in params.camera_offsets.items():
+        reading[model.camera_joint_indices(name)] = np.asarray(offsets, float)
+    return reading
 
 
 def kalman_params(noise: list[JointNoise], names: list[str]) -> KalmanBankParams:

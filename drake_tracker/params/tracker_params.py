@@ -110,8 +110,15 @@ class TrackerParams:
     image: ImageParams = field(default_factory=ImageParams)
     #: When the tracker reports ``tracking``, ``uncertain`` or ``lost``.
     health: HealthParams = field(default_factory=HealthParams)
-    #: Estimate the six virtual camera joints (False: the camera stays nominal).
+    #: Estimate the six virtual camera joints (False: the camera stays nominal, or at
+    #: its ``camera_offsets``).
     estimate_camera_offset: bool = True
+    #: Camera name -> its calibrated mounting error, [x, y, z] in m then [rx, ry, rz]
+    #: in rad (its six virtual joints), e.g. from ``drake-tracker calibrate-cameras``.
+    #: Those joints then read these values instead of 0 (the nominal mount): the
+    #: estimate starts from the calibrated mount and every restart returns to it, and
+    #: without ``estimate_camera_offset`` it stays there.
+    camera_offsets: dict[str, list[float]] = field(default_factory=dict)
     #: False: joint readings are ignored (the vision-only method); then the angles'
     #: prior comes from ``initial_positions_rad`` and the angle process noise.
     use_joint_readings: bool = True

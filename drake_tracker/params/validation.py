@@ -51,6 +51,10 @@ def validate_tracker_params(params: TrackerParams) -> None:
     params.health.validate()
     for name, value in params.initial_positions_rad.items():
         _check(math.isfinite(value), f"initial_positions_rad[{name}]", value, "must be finite")
+    for name, offsets in params.camera_offsets.items():
+        _check(len(offsets) == 6 and all(math.isfinite(v) for v in offsets),
+               f"camera_offsets[{name}]", offsets,
+               "must be 6 finite values: x, y, z (m), rx, ry, rz (rad)")
     _check(math.isfinite(params.buffer_horizon_s), "buffer_horizon_s",
            params.buffer_horizon_s, "must be finite (the buffer is pruned to it)")
     _check(params.buffer_horizon_s > 0, "buffer_horizon_s", params.buffer_horizon_s,

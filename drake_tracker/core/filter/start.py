@@ -1,5 +1,6 @@
 """The filter's start: the Kalman bank for a model, its first belief, the delay buffer,
-and the bank's reading vector (robot joints, then 0 for the virtual camera joints)."""
+and the bank's reading vector (robot joints, then each virtual camera joint's calibrated
+offset or 0)."""
 
 from __future__ import annotations
 
@@ -68,7 +69,11 @@ class JointLayout(Protocol):
 
 def full_reading(layout: JointLayout, robot_reading: np.ndarray) -> np.ndarray:
     """The bank's reading vector: the robot joints' readings (``robot_reading``, in
-    ``robot_joint_names`` order), 0 for the virtual joints."""
-    q = np.zeros(layout.num_joints)
+    ``robot_joint_names`` order), and for the virtual joints a calibrated camera's
+    offsets (``ResolvedParams``: ``camera_offsets``) or 0 (a model: the nominal mount)."""
+    if isinstance(layout, ResolvedParams):
+        q = layout.joints.virtual_reading.copy()
+    else:
+        q = np.zeros(layout.num_joints)
     q[layout.robot_joint_indices] = robot_reading
     return q

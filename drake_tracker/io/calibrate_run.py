@@ -1,0 +1,180 @@
+"""``drake-tracker calibrate-cameras``: each camera's mounting error, from a recorded run
+of several cameras (``core/calibration/window_fit.py`` has the fit and why it is needed).
+
+The tracker replays the run to the end of the window; its estimate there (every robot
+joint's bias and each camera's offsets) starts the fit. The window's images, at most
+``images_per_camera`` of each camera spread evenly over it, are scored by that tracker's
+own image updates. The joints that move a camera (a pan-tilt head) are fitted with the
+rest, then folded into that camera's offsets at their mean reading over the window: a
+constant error of a head joint and a mounting error are one rigid transform there. The
+result is a ``TrackerParams`` fragment for every later run of the same cell
+(``--params``): ``camera_offsets``, held (``estimate_camera_offset: false``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from pydrake.math import RollPitchYaw
+
+from drake_tracker.core.calibration.window_fit import (
+    WindowFit,
+    WindowImage,
+    WindowLayout,
+    fit_window,
+)
+from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B
+
+if TYPE_CHECKING:
+    from drake_tracker.io.recording import RecordedRun
+    from drake_tracker.params.tracker_params import TrackerParams
+    from drake_tracker.robot.model import TrackerModel
+
+#: The fit's initial spreads: a bias (rad), an offset's translation (m) and rotation (rad).
+BIAS_SCALE_RAD, OFFSET_SCALE_M, OFFSET_SCALE_RAD = np.radians(1.0), 0.005, np.radians(0.5)
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """Each camera's calibrated offsets (x, y, z in m; rx, ry, rz in rad), the fit, and
+    the images it used per camera."""
+
+    offsets: dict[str, np.ndarray]
+    fit: WindowFit
+    window_s: tuple[float, float]
+    images: dict[str, int]
+
+    def params_yaml(self) -> str:
+        """The ``TrackerParams`` fragment: ``camera_offsets``, held
+        (``estimate_camera_offset: false``; true lets the images move them again)."""
+        lines = [f"# drake-tracker calibrate-cameras: window {self.window_s[0]:g}-"
+                 f"{self.window_s[1]:g} s, images {self.images}, log-likelihood "
+                 f"{self.fit.log_likelihood_start:.0f} -> {self.fit.log_likelihood:.0f}",
+                 "estimate_camera_offset: false",
+                 "camera_offsets:"]
+        for name, o in self.offsets.items():
+            lines.append(f"  {name}: [{', '.join(f'{v:.6g}' for v in o)}]")
+        return "\n".join(lines) + "\n"
+
+
+def calibrate_cameras(run: RecordedRun, params: TrackerParams | None = None, *,
+                      start_s: float = 0.5, end_s: float = 2.5, images_per_camera: int = 10,
+                      evaluations: int = 8000, seed: int = 0,
+                      model: TrackerModel | None = None) -> CameraCalibration:
+    """Fits every camera's offsets to the images of ``run`` captured in [start_s, end_s]
+    (see the module). ValueError for a run of one camera, an empty window, or a camera
+    without an image in it."""
+    from drake_tracker.io.replay import model_for_run, readings_at
+    from drake_tracker.params.tracker_params import TrackerParams
+
+    model = model if model is not None else model_for_run(run)
+    if not run.other_cameras:
+        raise ValueError("calibrate-cameras needs a run of several cameras: with one, the "
+                         "arm's biases and the camera's offsets explain its view together")
+    if not (0.0 <= start_s < end_s):
+        raise ValueError(f"the window must have 0 <= start < end, got {start_s}-{end_s} s")
+    params = params if params is not None else TrackerParams()
+    seen: dict[str, int] = {}
+    tracker = _tracked_until(run, model, params, end_s)
+    layout = _layout(model, tracker.params)
+    images = []
+    for camera in run.cameras:
+        chosen = np.flatnonzero((camera.capture_times_s >= start_s)
+                                & (camera.capture_times_s <= end_s))
+        if len(chosen) == 0:
+            raise ValueError(f"camera '{camera.name}' has no image in {start_s}-{end_s} s")
+        chosen = chosen[np.unique(np.linspace(0, len(chosen) - 1, images_per_camera)
+                                  .round().astype(int))]
+        seen[camera.name] = len(chosen)
+        update = tracker.channel(camera.name).images.update
+        readings = readings_at(run, camera.capture_times_s[chosen])
+        for k, reading in zip(chosen, readings):
+            observation = update.prepare(camera.depth_images_m[k])
+            images.append(WindowImage(camera.name, reading, _scorer(update, observation)))
+    _, belief = tracker.buffer.present()
+    start = np.concatenate([belief[MEAN_B][model.robot_joint_indices][layout.bias_joints]]
+                           + [belief[MEAN_A][j] for j in layout.camera_joints.values()])
+    scale = np.concatenate([np.full(len(layout.bias_joints), BIAS_SCALE_RAD)]
+                           + [np.array([OFFSET_SCALE_M] * 3 + [OFFSET_SCALE_RAD] * 3)]
+                           * len(layout.camera_joints))
+    fit = fit_window(layout, images, start, scale, evaluations=evaluations, seed=seed)
+    window_readings = readings_at(run, np.linspace(start_s, end_s, 21))
+    offsets = _folded_offsets(model, layout, fit, np.nanmean(window_readings, axis=0))
+    return CameraCalibration(offsets, fit, (start_s, end_s), seen)
+
+
+def _tracked_until(run: RecordedRun, model: TrackerModel, params: TrackerParams,
+                   end_s: float):
+    """A tracker fed every event of ``run`` that arrived by ``end_s``."""
+    from drake_tracker.io.stream import ImageEvent, ReadingEvent, track_stream
+    from drake_tracker.io.track_files import run_events
+    from drake_tracker.tracker import Tracker
+
+    def arrived(event) -> bool:
+        if isinstance(event, ReadingEvent):
+            return event.time_s <= end_s
+        if isinstance(event, ImageEvent):
+            return (event.capture_s if event.arrival_s is None else event.arrival_s) <= end_s
+        return True
+
+    tracker = Tracker(model, params=params, cameras=run.intrinsics_by_camera)
+    track_stream((e for e in run_events(run) if arrived(e)), tracker)
+    if not tracker.started:
+        raise ValueError(f"no joint reading by {end_s} s: the tracker did not start")
+    return tracker
+
+
+def _scorer(update, observation):
+    return lambda q: update.log_likelihood(q, observation)
+
+
+def _layout(model: TrackerModel, params) -> WindowLayout:
+    """Every robot joint with a bias (the camera chains' included: folded afterwards)."""
+    has_bias = params.joints.has_bias[model.robot_joint_indices]
+    return WindowLayout(model.num_joints, np.asarray(model.robot_joint_indices),
+                        np.flatnonzero(has_bias),
+                        {name: model.camera_joint_indices(name) for name in model.camera_names})
+
+
+def _folded_offsets(model: TrackerModel, layout: WindowLayout, fit: WindowFit,
+                    reading: np.ndarray) -> dict[str, np.ndarray]:
+    """Each camera's offsets that put it, with every robot joint at ``reading`` (no
+    bias), where the fit puts it (its biases and offsets) at that reading."""
+    q_fit = layout.configurations(fit.theta, reading)[0]
+    q_plain = q_fit.copy()
+    q_plain[layout.robot_indices] = reading
+    return {name: equivalent_offsets(model, name, q_fit, q_plain)
+            for name in model.camera_names}
+
+
+def equivalent_offsets(model: TrackerModel, camera: str, q_target: np.ndarray,
+                       q: np.ndarray) -> np.ndarray:
+    """(6,) the offsets of camera ``camera`` that put it, at configuration ``q`` (its
+    own offsets replaced), where it is at ``q_target``: Gauss-Newton on the pose error
+    (translation, roll-pitch-yaw), from ``q_target``'s offsets, with Drake's kinematics.
+    """
+    plant = model.plant
+    context = plant.CreateDefaultContext()
+    frame, joints = model.camera(camera).frame, model.camera_joint_indices(camera)
+    plant.SetPositions(context, q_target)
+    target = plant.CalcRelativeTransform(context, plant.world_frame(), frame)
+    q = np.array(q, float)
+
+    def residual(o: np.ndarray) -> np.ndarray:
+        q[joints] = o
+        plant.SetPositions(context, q)
+        error = plant.CalcRelativeTransform(context, plant.world_frame(), frame).inverse() \
+            @ target
+        return np.concatenate([error.translation(), RollPitchYaw(error.rotation()).vector()])
+
+    o = np.array(q_target[joints], float)
+    for _ in range(10):  # the map is nearly linear over degrees: a few steps
+        r = residual(o)
+        jacobian = np.column_stack([(residual(o + 1e-6 * e) - r) / 1e-6 for e in np.eye(6)])
+        step = np.linalg.lstsq(jacobian, -r, rcond=None)[0]
+        o = o + step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    return o
