@@ -96,6 +96,7 @@ def calibrate_cameras(run: RecordedRun, params: TrackerParams | None = None, *,
     _, belief = tracker.buffer.present()
     start = np.concatenate([belief[MEAN_B][model.robot_joint_indices][layout.bias_joints]]
                            + [belief[MEAN_A][j] for j in layout.camera_joints.values()])
+    _require_views(tracker, layout, images, start, tracker.params.health.min_robot_pixels)
     scale = np.concatenate([np.full(len(layout.bias_joints), BIAS_SCALE_RAD)]
                            + [np.array([OFFSET_SCALE_M] * 3 + [OFFSET_SCALE_RAD] * 3)]
                            * len(layout.camera_joints))
@@ -124,6 +125,21 @@ def _tracked_until(run: RecordedRun, model: TrackerModel, params: TrackerParams,
     if not tracker.started:
         raise ValueError(f"no joint reading by {end_s} s: the tracker did not start")
     return tracker
+
+
+def _require_views(tracker, layout: WindowLayout, images: list[WindowImage],
+                   theta: np.ndarray, min_pixels: int) -> None:
+    """ValueError when a camera renders fewer than ``min_pixels`` of the arm, at the
+    tracker's estimate, in every one of its window images: the fit could not place it."""
+    for camera in layout.camera_joints:
+        renderer = tracker.channel(camera).images.update.renderer
+        shown = [int(np.sum(np.isfinite(renderer.render(
+            layout.configurations(theta, im.reading, camera))[0])))
+            for im in images if im.camera == camera]
+        if max(shown) < min_pixels:
+            raise ValueError(f"camera '{camera}' sees at most {max(shown)} pixels of the arm "
+                             f"in the window's images (fewer than {min_pixels}): choose a "
+                             f"window in which every camera sees the arm")
 
 
 def _scorer(update, observation):

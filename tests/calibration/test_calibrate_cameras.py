@@ -206,3 +206,16 @@ def test_the_command_writes_parameters_that_track_uses(recorded, tmp_path, capsy
     code, _, err = run_cli(["calibrate-cameras", "--run", str(single), "--out",
                             str(tmp_path / "x.yaml")], capsys)
     assert_one_line_error(code, err, "single.npz", "needs a run of several cameras")
+
+
+def test_a_window_in_which_a_camera_sees_no_arm_is_refused(recorded):
+    """A camera whose images show no arm cannot be placed: a clear error, no fit."""
+    run = recorded
+    model = model_for_run(run)
+    params = seeded_params(0)
+    # Turned away from the arm: at the tracker's estimate it renders none of it.
+    params.camera_offsets = {"post_camera": [0.0, 0.0, 0.0, np.pi / 2, 0.0, 0.0]}
+    params.estimate_camera_offset = False
+    with pytest.raises(ValueError, match="camera 'post_camera' sees at most 0 pixels"):
+        calibrate_cameras(run, params, start_s=0.3, end_s=1.5, images_per_camera=3,
+                          evaluations=200, model=model)

@@ -202,9 +202,14 @@ def two_camera_run():
                                duration_s=2.0)
 
 
-@pytest.mark.parametrize("latency_s", [0.0, 0.01])
+#: Calibrated, held offsets of the two cameras (``camera_offsets``): both shells read them.
+CALIBRATED = {"camera": [0.02, -0.015, 0.018, 0.046, -0.026, 0.017],
+              "post_camera": [-0.015, 0.02, -0.01, -0.026, 0.017, 0.035]}
+
+
+@pytest.mark.parametrize("latency_s, calibrated", [(0.0, False), (0.01, False), (0.0, True)])
 def test_two_cameras_give_the_same_estimates_offline_and_in_the_diagram(two_camera_run,
-                                                                        latency_s):
+                                                                        latency_s, calibrated):
     """The same recorded two-camera data through the offline ``Tracker`` (images named
     by camera) and through ``AddTracker(cameras=...)``: the same joint estimates and the
     same offset of each camera wherever no image is in flight, and the same images
@@ -222,6 +227,8 @@ def test_two_cameras_give_the_same_estimates_offline_and_in_the_diagram(two_came
     times = run.reading_times_s + 0.6 * h
     p = small_params()
     p.image.seed, p.image.update_latency_s = 5, latency_s
+    if calibrated:
+        p.camera_offsets, p.estimate_camera_offset = CALIBRATED, False
     tracker = Tracker(model, params=p, cameras={run.camera_name: run.camera_intrinsics} | {
         c.name: c.intrinsics for c in run.other_cameras})
     offline, applied = feed_cameras(tracker, run, times)
@@ -241,7 +248,12 @@ def test_two_cameras_give_the_same_estimates_offline_and_in_the_diagram(two_came
             run, [o[name] for o in offsets],
             [None if e is None else e.camera_offsets[name] for e in offline],
             first, margin, h, arrivals)
+    final = offline[-1].camera_offsets
+    if calibrated:  # held where the calibration put them, in both shells
+        for name in model.camera_names:
+            np.testing.assert_allclose(final[name], CALIBRATED[name], atol=1e-9)
+            np.testing.assert_allclose(offsets[-1][name], CALIBRATED[name], atol=1e-9)
+        return
     # Each camera's own offset moved from its prior (0): its images were scored
     # through it.
-    final = offline[-1].camera_offsets
     assert all(np.any(final[name] != 0.0) for name in model.camera_names)
