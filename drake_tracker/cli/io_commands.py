@@ -178,8 +178,20 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
                "--out out/cal.npz\n  drake-tracker calibrate-cameras --run out/cal.npz "
                "--out out/cameras.yaml\n  drake-tracker track --run out/run.npz "
                "--params out/cameras.yaml")
-    p.add_argument("--run", required=True, metavar="FILE.npz",
-                   help="recorded run of several cameras, written by 'drake-tracker record'")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--run", metavar="FILE.npz",
+                        help="recorded run of several cameras, written by 'drake-tracker "
+                             "record'")
+    source.add_argument("--bag", metavar="PATH", help="ROS bag with a depth topic per "
+                        "camera (--depth-topic NAME=TOPIC, --robot; as 'track --bag')")
+    p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
+                   help="with --bag: the robot, its cameras named as the topics' NAMEs")
+    p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic")
+    p.add_argument("--depth-topic", default=None, action="append", metavar="NAME=TOPIC",
+                   help="with --bag: camera NAME's depth topic, once per camera")
+    p.add_argument("--camera-info-topic", default=None, action="append",
+                   metavar="NAME=TOPIC", help="with --bag: camera NAME's CameraInfo topic "
+                   "(default: the one beside its depth topic)")
     p.add_argument("--out", required=True, metavar="FILE.yaml",
                    help="the tracker parameters to write (camera_offsets)")
     p.add_argument("--from", dest="start_s", type=float, default=0.5, metavar="SECONDS",
@@ -196,16 +208,19 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
     def run(args):
         params = load_params_arg(args.params)
         out = check_new_file(args.out, ".yaml")
-        recorded = load_run_arg(args.run)
-        from drake_tracker.io.calibrate_run import calibrate_cameras
-
+        window = dict(start_s=args.start_s, end_s=args.end_s,
+                      images_per_camera=args.images_per_camera, evaluations=args.evaluations)
         try:
-            result = calibrate_cameras(recorded, params, start_s=args.start_s,
-                                       end_s=args.end_s,
-                                       images_per_camera=args.images_per_camera,
-                                       evaluations=args.evaluations)
+            if args.bag is not None:
+                result = _calibrate_bag(args, params, window)
+            else:
+                if args.robot is not None:
+                    raise UsageError("--robot is for --bag: a recorded run carries its robot")
+                from drake_tracker.io.calibrate_run import calibrate_run
+
+                result = calibrate_run(load_run_arg(args.run), params, **window)
         except ValueError as err:
-            raise UsageError(f"'{args.run}': {err}") from None
+            raise UsageError(f"'{args.bag or args.run}': {err}") from None
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(result.params_yaml())
         print(result.params_yaml(), end="")
@@ -213,6 +228,27 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
         return 0
 
     p.set_defaults(func=run)
+
+
+def _calibrate_bag(args, params, window: dict):
+    """``calibrate-cameras --bag``: the bag's events and camera models, as ``track``."""
+    model = robot_model(args.robot, "--bag")
+    try:
+        from drake_tracker.io.bag_source import BagSource, check_camera_topics
+    except ImportError as err:
+        raise UsageError(str(err)) from None
+    if args.params:
+        check_params_for_model(params, model, f"parameter file '{args.params}'")
+    topics = bag_topics(args.joint_topic, args.depth_topic, args.camera_info_topic)
+    check_camera_topics(topics.cameras, model.camera_names)
+    source = BagSource(args.bag, model.robot_joint_names, topics)
+    from drake_tracker.io.calibrate_run import calibrate_cameras
+
+    try:
+        return calibrate_cameras(source.events(), model, source.camera_models(), params,
+                                 **window)
+    finally:
+        source.close()
 
 
 def robot_model(path: str | None, flag: str) -> TrackerModel:

@@ -13,6 +13,8 @@ result is a ``TrackerParams`` fragment for every later run of the same cell
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -26,9 +28,11 @@ from drake_tracker.core.calibration.window_fit import (
     fit_window,
 )
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B
+from drake_tracker.core.sensors.depth_frames import depth_to_metres
 
 if TYPE_CHECKING:
     from drake_tracker.io.recording import RecordedRun
+    from drake_tracker.io.stream import Event
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
 
@@ -59,40 +63,55 @@ class CameraCalibration:
         return "\n".join(lines) + "\n"
 
 
-def calibrate_cameras(run: RecordedRun, params: TrackerParams | None = None, *,
-                      start_s: float = 0.5, end_s: float = 2.5, images_per_camera: int = 10,
-                      evaluations: int = 8000, seed: int = 0,
-                      model: TrackerModel | None = None) -> CameraCalibration:
-    """Fits every camera's offsets to the images of ``run`` captured in [start_s, end_s]
-    (see the module). ValueError for a run of one camera, an empty window, or a camera
-    without an image in it."""
-    from drake_tracker.io.replay import model_for_run, readings_at
+def calibrate_run(run: RecordedRun, params: TrackerParams | None = None, *,
+                  model: TrackerModel | None = None, **window) -> CameraCalibration:
+    """:func:`calibrate_cameras` on a recorded run (``window``: its keyword arguments)."""
+    from drake_tracker.io.replay import model_for_run
+    from drake_tracker.io.track_files import run_events
+
+    if not run.other_cameras:
+        raise ValueError(_ONE_CAMERA)
+    model = model if model is not None else model_for_run(run)
+    return calibrate_cameras(run_events(run), model, run.intrinsics_by_camera, params,
+                             **window)
+
+
+_ONE_CAMERA = ("calibrate-cameras needs several cameras: with one, the arm's biases and "
+               "the camera's offsets explain its view together")
+
+
+def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dict,
+                      params: TrackerParams | None = None, *, start_s: float = 0.5,
+                      end_s: float = 2.5, images_per_camera: int = 10,
+                      evaluations: int = 8000, seed: int = 0) -> CameraCalibration:
+    """Fits every camera's offsets to the images captured in [start_s, end_s] of
+    ``events`` (a recorded run's, a bag's: ``io/stream.py``), ``cameras`` each camera's
+    intrinsics by name (see the module). ValueError for fewer than two cameras, an empty
+    window, a camera without an image in it or one that sees no arm there."""
     from drake_tracker.params.tracker_params import TrackerParams
 
-    model = model if model is not None else model_for_run(run)
-    if not run.other_cameras:
-        raise ValueError("calibrate-cameras needs a run of several cameras: with one, the "
-                         "arm's biases and the camera's offsets explain its view together")
+    if len(cameras) < 2:
+        raise ValueError(_ONE_CAMERA)
     if not (0.0 <= start_s < end_s):
         raise ValueError(f"the window must have 0 <= start < end, got {start_s}-{end_s} s")
     params = params if params is not None else TrackerParams()
-    seen: dict[str, int] = {}
-    tracker = _tracked_until(run, model, params, end_s)
+    window = _Window(start_s, end_s)
+    tracker = _tracked_until(window.collect(events), model, cameras, params, end_s)
     layout = _layout(model, tracker.params)
-    images = []
-    for camera in run.cameras:
-        chosen = np.flatnonzero((camera.capture_times_s >= start_s)
-                                & (camera.capture_times_s <= end_s))
-        if len(chosen) == 0:
-            raise ValueError(f"camera '{camera.name}' has no image in {start_s}-{end_s} s")
-        chosen = chosen[np.unique(np.linspace(0, len(chosen) - 1, images_per_camera)
-                                  .round().astype(int))]
-        seen[camera.name] = len(chosen)
-        update = tracker.channel(camera.name).images.update
-        readings = readings_at(run, camera.capture_times_s[chosen])
-        for k, reading in zip(chosen, readings):
-            observation = update.prepare(camera.depth_images_m[k])
-            images.append(WindowImage(camera.name, reading, _scorer(update, observation)))
+    images, seen = [], {}
+    offset_s = tracker.params.image.image_time_offset_s
+    for name in model.camera_names:
+        mine = window.images.get(name, [])
+        if not mine:
+            raise ValueError(f"camera '{name}' has no image in {start_s}-{end_s} s")
+        chosen = [mine[k] for k in np.unique(np.linspace(0, len(mine) - 1,
+                                                         images_per_camera).round().astype(int))]
+        seen[name] = len(chosen)
+        update = tracker.channel(name).images.update
+        for capture_s, depth in chosen:
+            observation = update.prepare(depth)
+            images.append(WindowImage(name, window.reading_at(capture_s - offset_s),
+                                      _scorer(update, observation)))
     _, belief = tracker.buffer.present()
     start = np.concatenate([belief[MEAN_B][model.robot_joint_indices][layout.bias_joints]]
                            + [belief[MEAN_A][j] for j in layout.camera_joints.values()])
@@ -101,16 +120,47 @@ def calibrate_cameras(run: RecordedRun, params: TrackerParams | None = None, *,
                            + [np.array([OFFSET_SCALE_M] * 3 + [OFFSET_SCALE_RAD] * 3)]
                            * len(layout.camera_joints))
     fit = fit_window(layout, images, start, scale, evaluations=evaluations, seed=seed)
-    window_readings = readings_at(run, np.linspace(start_s, end_s, 21))
-    offsets = _folded_offsets(model, layout, fit, np.nanmean(window_readings, axis=0))
+    head_pose = np.mean([window.reading_at(t) for t in np.linspace(start_s, end_s, 21)],
+                        axis=0)
+    offsets = _folded_offsets(model, layout, fit, head_pose)
     return CameraCalibration(offsets, fit, (start_s, end_s), seen)
 
 
-def _tracked_until(run: RecordedRun, model: TrackerModel, params: TrackerParams,
-                   end_s: float):
-    """A tracker fed every event of ``run`` that arrived by ``end_s``."""
+class _Window:
+    """What a stream shows of the window: every reading up to its end, and each
+    camera's images captured in it (depth in metres)."""
+
+    def __init__(self, start_s: float, end_s: float):
+        self.start_s, self.end_s = start_s, end_s
+        self.reading_times: list[float] = []
+        self.readings: list[np.ndarray] = []
+        self.images: dict[str, list[tuple[float, np.ndarray]]] = {}
+
+    def collect(self, events: Iterable[Event]) -> Iterator[Event]:
+        from drake_tracker.io.stream import ImageEvent, ReadingEvent
+
+        for event in events:
+            if isinstance(event, ReadingEvent) and np.all(np.isfinite(event.positions)):
+                self.reading_times.append(event.time_s)
+                self.readings.append(np.asarray(event.positions, float))
+            elif isinstance(event, ImageEvent) and event.camera is not None and (
+                    self.start_s <= event.capture_s <= self.end_s):
+                depth = event.depth
+                if np.asarray(depth).dtype == np.uint16:  # a 16-bit camera's millimetres
+                    depth = depth_to_metres(depth, "16U_mm")
+                self.images.setdefault(event.camera, []).append((event.capture_s, depth))
+            yield event
+
+    def reading_at(self, t: float) -> np.ndarray:
+        """The latest reading stamped at or before ``t`` (the first one before it)."""
+        k = int(np.searchsorted(self.reading_times, t + 1e-9, side="right")) - 1
+        return self.readings[max(k, 0)]
+
+
+def _tracked_until(events: Iterable[Event], model: TrackerModel, cameras: dict,
+                   params: TrackerParams, end_s: float):
+    """A tracker fed every event that arrived by ``end_s``."""
     from drake_tracker.io.stream import ImageEvent, ReadingEvent, track_stream
-    from drake_tracker.io.track_files import run_events
     from drake_tracker.tracker import Tracker
 
     def arrived(event) -> bool:
@@ -120,11 +170,20 @@ def _tracked_until(run: RecordedRun, model: TrackerModel, params: TrackerParams,
             return (event.capture_s if event.arrival_s is None else event.arrival_s) <= end_s
         return True
 
-    tracker = Tracker(model, params=params, cameras=run.intrinsics_by_camera)
-    track_stream((e for e in run_events(run) if arrived(e)), tracker)
+    tracker = Tracker(model, params=params, cameras=cameras)
+    stream = itertools.takewhile(lambda e: _before(e, end_s + 1.0), events)
+    track_stream((e for e in stream if arrived(e)), tracker)
     if not tracker.started:
         raise ValueError(f"no joint reading by {end_s} s: the tracker did not start")
     return tracker
+
+
+def _before(event, limit_s: float) -> bool:
+    """Whether the stream (in arrival order) has not yet passed ``limit_s``: a bag or
+    log is not read to its end for a window at its start."""
+    from drake_tracker.io.stream import ReadingEvent
+
+    return not (isinstance(event, ReadingEvent) and event.time_s > limit_s)
 
 
 def _require_views(tracker, layout: WindowLayout, images: list[WindowImage],

@@ -7,7 +7,7 @@ from fast_params import seeded_params
 from two_cameras import two_camera_config
 
 from drake_tracker.core.filter.kalman import MEAN_A
-from drake_tracker.io.calibrate_run import calibrate_cameras, equivalent_offsets
+from drake_tracker.io.calibrate_run import calibrate_run, equivalent_offsets
 from drake_tracker.io.replay import model_for_run, readings_at
 from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.params.resolve import resolve_tracker_params
@@ -124,7 +124,7 @@ def test_calibrate_cameras_finds_each_mount_better_than_the_tracker_did(recorded
     model = model_for_run(run)
     params = seeded_params(0)
     params.image.min_image_interval_s = 0.1
-    result = calibrate_cameras(run, params, start_s=0.3, end_s=1.5, images_per_camera=6,
+    result = calibrate_run(run, params, start_s=0.3, end_s=1.5, images_per_camera=6,
                                evaluations=3000)
     assert result.fit.log_likelihood > result.fit.log_likelihood_start
     assert result.images == {name: 6 for name in model.camera_names}
@@ -176,8 +176,8 @@ def test_a_run_of_one_camera_cannot_be_calibrated():
     from drake_tracker.robot.model import robot_preset
 
     run = synthetic_run(build_tracker_model(robot_preset("apollo")), duration_s=0.3)
-    with pytest.raises(ValueError, match="needs a run of several cameras"):
-        calibrate_cameras(run)
+    with pytest.raises(ValueError, match="needs several cameras"):
+        calibrate_run(run)
 
 
 def test_the_command_writes_parameters_that_track_uses(recorded, tmp_path, capsys):
@@ -205,7 +205,7 @@ def test_the_command_writes_parameters_that_track_uses(recorded, tmp_path, capsy
     synthetic_run(build_tracker_model(robot_preset("apollo")), duration_s=0.3).save(single)
     code, _, err = run_cli(["calibrate-cameras", "--run", str(single), "--out",
                             str(tmp_path / "x.yaml")], capsys)
-    assert_one_line_error(code, err, "single.npz", "needs a run of several cameras")
+    assert_one_line_error(code, err, "single.npz", "needs several cameras")
 
 
 def test_a_window_in_which_a_camera_sees_no_arm_is_refused(recorded):
@@ -217,5 +217,5 @@ def test_a_window_in_which_a_camera_sees_no_arm_is_refused(recorded):
     params.camera_offsets = {"post_camera": [0.0, 0.0, 0.0, np.pi / 2, 0.0, 0.0]}
     params.estimate_camera_offset = False
     with pytest.raises(ValueError, match="camera 'post_camera' sees at most 0 pixels"):
-        calibrate_cameras(run, params, start_s=0.3, end_s=1.5, images_per_camera=3,
-                          evaluations=200, model=model)
+        calibrate_run(run, params, start_s=0.3, end_s=1.5, images_per_camera=3,
+                      evaluations=200, model=model)

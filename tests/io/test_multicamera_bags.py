@@ -222,3 +222,27 @@ def test_an_image_without_an_arrival_is_warned_when_the_bag_is_written(recorded,
     finally:
         source.close()
     assert sum(e.camera == "post_camera" for e in images) == len(arrivals) - 1
+
+
+def test_a_bag_is_calibrated_as_the_run_it_was_written_from(recorded, tmp_path, capsys):
+    """``calibrate-cameras --bag`` reads each camera's depth topic as ``track --bag``
+    does, and gives the calibration of the recorded run the bag was written from."""
+    from cli_runs import run_cli
+
+    from drake_tracker.params.loading import load_tracker_params
+
+    run, folder = recorded
+    window = ["--from", "0.3", "--to", "1.5", "--images-per-camera", "3",
+              "--evaluations", "300", "--params", str(folder / "params.yaml")]
+    code, _, err = run_cli(["calibrate-cameras", "--bag", str(folder / "run.mcap"),
+                            "--robot", str(folder / "robot.yaml"), *DEPTH, *window,
+                            "--out", str(tmp_path / "bag.yaml")], capsys)
+    assert code == 0, err
+    code, _, err = run_cli(["calibrate-cameras", "--run", str(folder / "run.npz"), *window,
+                            "--out", str(tmp_path / "run.yaml")], capsys)
+    assert code == 0, err
+    from_bag = load_tracker_params(tmp_path / "bag.yaml").camera_offsets
+    from_run = load_tracker_params(tmp_path / "run.yaml").camera_offsets
+    assert sorted(from_bag) == ["camera", "post_camera"]
+    for name in from_bag:
+        np.testing.assert_allclose(from_bag[name], from_run[name], rtol=1e-5, atol=1e-9)
