@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -29,6 +29,8 @@ from drake_tracker.core.calibration.window_fit import (
 )
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B
 from drake_tracker.core.sensors.depth_frames import depth_to_metres
+from drake_tracker.params.resolve import joint_noise_for
+from drake_tracker.params.tracker_params import JointNoise
 
 if TYPE_CHECKING:
     from drake_tracker.io.recording import RecordedRun
@@ -49,10 +51,15 @@ class CameraCalibration:
     fit: WindowFit
     window_s: tuple[float, float]
     images: dict[str, int]
+    #: The joints that move a camera and not the hand (a pan-tilt head), each with its
+    #: noise model as the fit's parameters had it, trusted from now on (``has_bias``
+    #: false): their constant error is in the offsets.
+    trusted: dict[str, JointNoise] = field(default_factory=dict)
 
     def params_yaml(self) -> str:
         """The ``TrackerParams`` fragment: ``camera_offsets``, held
-        (``estimate_camera_offset: false``; true lets the images move them again)."""
+        (``estimate_camera_offset: false``; true lets the images move them again), and
+        the joints that move only cameras trusted (``kalman.overrides``)."""
         lines = [f"# drake-tracker calibrate-cameras: window {self.window_s[0]:g}-"
                  f"{self.window_s[1]:g} s, images {self.images}, log-likelihood "
                  f"{self.fit.log_likelihood_start:.0f} -> {self.fit.log_likelihood:.0f}",
@@ -60,6 +67,12 @@ class CameraCalibration:
                  "camera_offsets:"]
         for name, o in self.offsets.items():
             lines.append(f"  {name}: [{', '.join(f'{v:.6g}' for v in o)}]")
+        if self.trusted:
+            lines += ["kalman:", "  overrides:"]
+            for name, noise in self.trusted.items():
+                fields = ", ".join(f"{k}: {str(v).lower() if isinstance(v, bool) else repr(v)}"
+                                   for k, v in asdict(noise).items())
+                lines.append(f"    {name}: {{{fields}}}")
         return "\n".join(lines) + "\n"
 
 
@@ -123,7 +136,25 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
     head_pose = np.mean([window.reading_at(t) for t in np.linspace(start_s, end_s, 21)],
                         axis=0)
     offsets = _folded_offsets(model, layout, fit, head_pose)
-    return CameraCalibration(offsets, fit, (start_s, end_s), seen)
+    names = camera_only_joints(model)
+    noise = joint_noise_for(params, list(model.joint_names), model.prismatic_joint_names,
+                            model.virtual_joint_names)
+    trusted = {n: replace(noise[model.joint_names.index(n)], has_bias=False) for n in names}
+    return CameraCalibration(offsets, fit, (start_s, end_s), seen, trusted)
+
+
+def camera_only_joints(model: TrackerModel) -> list[str]:
+    """The robot joints that move a camera and not the hand (a pan-tilt head): their
+    constant error and a mount's are one rigid transform, folded into the offsets."""
+    plant = model.plant
+    hand = model.end_effector_frame.body().index()
+    cameras = {model.camera(name).frame.body().index() for name in model.camera_names}
+    out = []
+    for name in model.robot_joint_names:
+        moved = set(plant.GetBodiesKinematicallyAffectedBy([plant.GetJointByName(name).index()]))
+        if moved & cameras and hand not in moved:
+            out.append(name)
+    return out
 
 
 class _Window:

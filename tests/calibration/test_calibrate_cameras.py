@@ -11,7 +11,7 @@ from drake_tracker.io.calibrate_run import calibrate_run, equivalent_offsets
 from drake_tracker.io.replay import model_for_run, readings_at
 from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.params.resolve import resolve_tracker_params
-from drake_tracker.params.tracker_params import TrackerParams
+from drake_tracker.params.tracker_params import JointNoise, TrackerParams
 from drake_tracker.robot.model import build_tracker_model
 from drake_tracker.tracker import Tracker
 
@@ -61,6 +61,15 @@ def test_a_head_bias_folds_into_the_camera_offsets_exactly_as_drake_places_the_c
     # The post is not on the head: its offsets are what they were.
     np.testing.assert_allclose(equivalent_offsets(model, "post", target, q),
                                q[model.camera_joint_indices("post")], atol=1e-12)
+
+
+def test_the_joints_that_move_only_a_camera_are_the_heads(two_cameras, apollo):
+    """Drake's kinematics: a head joint moves the head camera and not the hand; an arm
+    joint moves the hand; nothing moves the post."""
+    from drake_tracker.io.calibrate_run import camera_only_joints
+
+    assert camera_only_joints(two_cameras) == ["head_pan", "head_tilt"]
+    assert camera_only_joints(apollo) == ["head_pan", "head_tilt"]
 
 
 def test_camera_offsets_are_checked_and_name_the_models_cameras(two_cameras):
@@ -154,6 +163,9 @@ def test_calibrate_cameras_finds_each_mount_better_than_the_tracker_did(recorded
         assert mm < mm_start and rad < rad_start, (name, mm, mm_start, rad, rad_start)
     text = result.params_yaml()
     assert "camera_offsets:" in text
+    # The head that carries a camera is trusted from now on: its error is in the offsets.
+    assert sorted(result.trusted) == ["head_pan", "head_tilt"]
+    assert not any(noise.has_bias for noise in result.trusted.values())
 
 
 def test_the_written_parameters_load_as_tracker_parameters(tmp_path):
@@ -163,10 +175,12 @@ def test_the_written_parameters_load_as_tracker_parameters(tmp_path):
     offsets = {"camera": np.array([0.01, 0.0, -0.02, 0.001, 0.0, 0.03]),
                "post": np.arange(6) / 100.0}
     path = tmp_path / "cameras.yaml"
-    path.write_text(CameraCalibration(offsets, fit, (0.5, 2.5), {"camera": 3,
-                                                                  "post": 3}).params_yaml())
+    head = JointNoise(encoder_noise_std_rad=3e-4, has_bias=False)
+    path.write_text(CameraCalibration(offsets, fit, (0.5, 2.5), {"camera": 3, "post": 3},
+                                      {"head_pan": head}).params_yaml())
     loaded = load_tracker_params(path)
     assert loaded.estimate_camera_offset is False  # held where the fit put them
+    assert loaded.kalman.overrides == {"head_pan": head}
     for name, o in offsets.items():
         np.testing.assert_allclose(loaded.camera_offsets[name], o, rtol=1e-5)
 
