@@ -232,16 +232,7 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
 
 def _calibrate_bag(args, params, window: dict):
     """``calibrate-cameras --bag``: the bag's events and camera models, as ``track``."""
-    model = robot_model(args.robot, "--bag")
-    try:
-        from drake_tracker.io.bag_source import BagSource, check_camera_topics
-    except ImportError as err:
-        raise UsageError(str(err)) from None
-    if args.params:
-        check_params_for_model(params, model, f"parameter file '{args.params}'")
-    topics = bag_topics(args.joint_topic, args.depth_topic, args.camera_info_topic)
-    check_camera_topics(topics.cameras, model.camera_names)
-    source = BagSource(args.bag, model.robot_joint_names, topics)
+    model, source = _open_bag(args, params)
     from drake_tracker.io.calibrate_run import calibrate_cameras
 
     try:
@@ -249,6 +240,24 @@ def _calibrate_bag(args, params, window: dict):
                                  **window)
     finally:
         source.close()
+
+
+def _open_bag(args, params):
+    """The robot (``--robot``) and the open ``BagSource`` of ``--bag`` with the topic
+    flags of ``track`` and ``calibrate-cameras``; a UsageError naming what is wrong."""
+    model = robot_model(args.robot, "--bag")
+    try:
+        from drake_tracker.io.bag_source import BagSource, check_camera_topics
+    except ImportError as err:
+        raise UsageError(str(err)) from None
+    if args.params:
+        check_params_for_model(params, model, f"parameter file '{args.params}'")
+    try:
+        topics = bag_topics(args.joint_topic, args.depth_topic, args.camera_info_topic)
+        check_camera_topics(topics.cameras, model.camera_names)
+        return model, BagSource(args.bag, model.robot_joint_names, topics)
+    except ValueError as err:
+        raise UsageError(str(err)) from None
 
 
 def robot_model(path: str | None, flag: str) -> TrackerModel:
@@ -280,19 +289,7 @@ def robot_model(path: str | None, flag: str) -> TrackerModel:
 
 
 def _track_bag(args, params) -> int:
-    model = robot_model(args.robot, "--bag")
-    try:
-        from drake_tracker.io.bag_source import BagSource, check_camera_topics
-    except ImportError as err:
-        raise UsageError(str(err)) from None
-    if args.params:
-        check_params_for_model(params, model, f"parameter file '{args.params}'")
-    try:
-        topics = bag_topics(args.joint_topic, args.depth_topic, args.camera_info_topic)
-        check_camera_topics(topics.cameras, model.camera_names)
-        source = BagSource(args.bag, model.robot_joint_names, topics)
-    except ValueError as err:
-        raise UsageError(str(err)) from None
+    model, source = _open_bag(args, params)
     from drake_tracker.io.track_files import print_report, track_bag
 
     try:
