@@ -24,6 +24,7 @@ from drake_tracker.cli.args import (
 from drake_tracker.cli.lcm_args import (
     add_lcm_track_arguments,
     check_lcm_flags,
+    open_lcm_log,
     track_lcm_log_command,
 )
 
@@ -184,14 +185,18 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
                              "record'")
     source.add_argument("--bag", metavar="PATH", help="ROS bag with a depth topic per "
                         "camera (--depth-topic NAME=TOPIC, --robot; as 'track --bag')")
+    source.add_argument("--lcm-log", metavar="FILE", help="lcm-logger file with a channel "
+                        "per camera (--camera NAME=WxH:..., --robot; as 'track --lcm-log')")
     p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
-                   help="with --bag: the robot, its cameras named as the topics' NAMEs")
+                   help="with --bag or --lcm-log: the robot, its cameras named as the "
+                        "topics' or cameras' NAMEs")
     p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic")
     p.add_argument("--depth-topic", default=None, action="append", metavar="NAME=TOPIC",
                    help="with --bag: camera NAME's depth topic, once per camera")
     p.add_argument("--camera-info-topic", default=None, action="append",
                    metavar="NAME=TOPIC", help="with --bag: camera NAME's CameraInfo topic "
                    "(default: the one beside its depth topic)")
+    add_lcm_track_arguments(p)
     p.add_argument("--out", required=True, metavar="FILE.yaml",
                    help="the tracker parameters to write (camera_offsets)")
     p.add_argument("--from", dest="start_s", type=float, default=0.5, metavar="SECONDS",
@@ -210,17 +215,21 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
         out = check_new_file(args.out, ".yaml")
         window = dict(start_s=args.start_s, end_s=args.end_s,
                       images_per_camera=args.images_per_camera, evaluations=args.evaluations)
+        check_lcm_flags(args)
         try:
             if args.bag is not None:
                 result = _calibrate_bag(args, params, window)
+            elif args.lcm_log is not None:
+                result = _calibrate_lcm_log(args, params, window)
             else:
                 if args.robot is not None:
-                    raise UsageError("--robot is for --bag: a recorded run carries its robot")
+                    raise UsageError("--robot is for --bag and --lcm-log: a recorded run "
+                                     "carries its robot")
                 from drake_tracker.io.calibrate_run import calibrate_run
 
                 result = calibrate_run(load_run_arg(args.run), params, **window)
         except ValueError as err:
-            raise UsageError(f"'{args.bag or args.run}': {err}") from None
+            raise UsageError(f"'{args.bag or args.lcm_log or args.run}': {err}") from None
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(result.params_yaml())
         print(result.params_yaml(), end="")
@@ -233,6 +242,19 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
 def _calibrate_bag(args, params, window: dict):
     """``calibrate-cameras --bag``: the bag's events and camera models, as ``track``."""
     model, source = _open_bag(args, params)
+    from drake_tracker.io.calibrate_run import calibrate_cameras
+
+    try:
+        return calibrate_cameras(source.events(), model, source.camera_models(), params,
+                                 **window)
+    finally:
+        source.close()
+
+
+def _calibrate_lcm_log(args, params, window: dict):
+    """``calibrate-cameras --lcm-log``: the log's events and cameras, as ``track``."""
+    model = robot_model(args.robot, "--lcm-log")
+    source = open_lcm_log(args, params, model)
     from drake_tracker.io.calibrate_run import calibrate_cameras
 
     try:

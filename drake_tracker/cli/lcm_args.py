@@ -1,4 +1,5 @@
-"""The LCM arguments of ``drake-tracker track`` and ``record`` (``cli/io_commands.py``)."""
+"""The LCM arguments of ``drake-tracker track``, ``calibrate-cameras`` and ``record``
+(``cli/io_commands.py``)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from drake_tracker.cli.args import UsageError, check_params_for_model, named_fla
 
 if TYPE_CHECKING:
     from drake_tracker.core.sensors.camera import CameraIntrinsics
-    from drake_tracker.io.lcm_log import LcmCamera
+    from drake_tracker.io.lcm_log import LcmCamera, LcmLogSource
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
 
@@ -81,10 +82,11 @@ def check_lcm_flags(args: argparse.Namespace) -> None:
                          "intrinsics")
 
 
-def track_lcm_log_command(args: argparse.Namespace, params: TrackerParams,
-                          model: TrackerModel) -> int:
-    """``drake-tracker track --lcm-log FILE --robot ROBOT.yaml --camera ...``: the log
-    through ``io/track_files.track_lcm_log``; every fault a one-line UsageError."""
+def open_lcm_log(args: argparse.Namespace, params: TrackerParams,
+                 model: TrackerModel) -> LcmLogSource:
+    """The open ``io/lcm_log.LcmLogSource`` of ``--lcm-log`` with its ``--camera``,
+    ``--image-channel``, ``--status-channel`` and ``--status-type``; every fault a
+    one-line UsageError."""
     try:
         cameras = lcm_cameras(args.camera, args.image_channel)
     except ValueError as err:
@@ -93,12 +95,23 @@ def track_lcm_log_command(args: argparse.Namespace, params: TrackerParams,
         check_params_for_model(params, model, f"parameter file '{args.params}'")
     try:
         from drake_tracker.io.lcm_log import LcmLogSource, check_lcm_cameras
-        from drake_tracker.io.track_files import print_report, track_lcm_log
 
         if cameras[0].name is not None:
             check_lcm_cameras(cameras, model.camera_names)
-        source = LcmLogSource(args.lcm_log, model.robot_joint_names, cameras,
-                              args.status_channel, status_type=args.status_type or "auto")
+        return LcmLogSource(args.lcm_log, model.robot_joint_names, cameras,
+                            args.status_channel, status_type=args.status_type or "auto")
+    except (ImportError, ValueError) as err:
+        raise UsageError(" ".join(str(err).split())) from None
+
+
+def track_lcm_log_command(args: argparse.Namespace, params: TrackerParams,
+                          model: TrackerModel) -> int:
+    """``drake-tracker track --lcm-log FILE --robot ROBOT.yaml --camera ...``: the log
+    through ``io/track_files.track_lcm_log``; every fault a one-line UsageError."""
+    source = open_lcm_log(args, params, model)
+    try:
+        from drake_tracker.io.track_files import print_report, track_lcm_log
+
         report = track_lcm_log(source, model, params, args.out)
     except (ImportError, ValueError) as err:
         raise UsageError(" ".join(str(err).split())) from None

@@ -183,3 +183,29 @@ def test_images_without_an_arrival_are_counted_or_warned_never_lost_silently(
     counts = Counter(event.channel for event in read_log(tmp_path / "broken.lcmlog"))
     assert counts["DRAKE_RGBD_CAMERA_IMAGES_camera"] == len(first) - 1
     assert counts["DRAKE_RGBD_CAMERA_IMAGES_post_camera"] == len(arrivals) - 2
+
+
+def test_an_lcm_log_is_calibrated_as_the_run_it_was_written_from(recorded, tmp_path,
+                                                                 capsys):
+    """``calibrate-cameras --lcm-log`` with a ``--camera NAME=...`` per camera gives the
+    calibration of the recorded run the log was written from."""
+    from drake_tracker.params.loading import load_tracker_params
+
+    run, folder = recorded
+    t0 = run.reading_times_s[0]  # the log's time base: its first stamp
+    window = ["--images-per-camera", "3", "--evaluations", "300", "--params",
+              str(folder / "params.yaml")]
+    code, _, err = run_cli(["calibrate-cameras", "--lcm-log", str(folder / "run.lcmlog"),
+                            "--robot", str(folder / "robot.yaml"), *_camera_flags(run),
+                            "--from", f"{0.3 - t0}", "--to", f"{1.5 - t0}", *window,
+                            "--out", str(tmp_path / "log.yaml")], capsys)
+    assert code == 0, err
+    code, _, err = run_cli(["calibrate-cameras", "--run", str(folder / "run.npz"),
+                            "--from", "0.3", "--to", "1.5", *window,
+                            "--out", str(tmp_path / "run.yaml")], capsys)
+    assert code == 0, err
+    from_log = load_tracker_params(tmp_path / "log.yaml").camera_offsets
+    from_run = load_tracker_params(tmp_path / "run.yaml").camera_offsets
+    assert sorted(from_log) == list(CAMERAS)
+    for name in CAMERAS:
+        np.testing.assert_allclose(from_log[name], from_run[name], rtol=1e-5, atol=1e-9)
