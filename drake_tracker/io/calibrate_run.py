@@ -77,8 +77,10 @@ class CameraCalibration:
 
 
 def calibrate_run(run: RecordedRun, params: TrackerParams | None = None, *,
-                  model: TrackerModel | None = None, **window) -> CameraCalibration:
-    """:func:`calibrate_cameras` on a recorded run (``window``: its keyword arguments)."""
+                  start_s: float = 0.5, end_s: float = 2.5, images_per_camera: int = 10,
+                  evaluations: int = 8000, seed: int = 0,
+                  model: TrackerModel | None = None) -> CameraCalibration:
+    """:func:`calibrate_cameras` on a recorded run of several cameras."""
     from drake_tracker.io.replay import model_for_run
     from drake_tracker.io.track_files import run_events
 
@@ -86,7 +88,9 @@ def calibrate_run(run: RecordedRun, params: TrackerParams | None = None, *,
         raise ValueError(_ONE_CAMERA)
     model = model if model is not None else model_for_run(run)
     return calibrate_cameras(run_events(run), model, run.intrinsics_by_camera, params,
-                             **window)
+                             start_s=start_s, end_s=end_s,
+                             images_per_camera=images_per_camera, evaluations=evaluations,
+                             seed=seed)
 
 
 _ONE_CAMERA = ("calibrate-cameras needs several cameras: with one, the arm's biases and "
