@@ -1,7 +1,8 @@
-"""``drake-tracker calibrate-cameras``: each camera's mounting error, from a recorded run
-of several cameras (``core/calibration/window_fit.py`` has the fit and why it is needed).
+"""``drake-tracker calibrate-cameras``: each camera's mounting error, from a recording of
+several cameras: a recorded run, a bag or an LCM log, as events (``io/stream.py``).
+``core/calibration/window_fit.py`` has the fit and why it is needed.
 
-The tracker replays the run to the end of the window; its estimate there (every robot
+The tracker replays the recording to the end of the window; its estimate there (every robot
 joint's bias and each camera's offsets) starts the fit. The window's images, at most
 ``images_per_camera`` of each camera spread evenly over it, are scored by that tracker's
 own image updates. The joints that move a camera (a pan-tilt head) are fitted with the
@@ -30,17 +31,15 @@ from drake_tracker.core.calibration.window_fit import (
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B
 from drake_tracker.core.sensors.depth_frames import depth_to_metres
 from drake_tracker.params.resolve import joint_noise_for
-from drake_tracker.params.tracker_params import JointNoise
+from drake_tracker.params.tracker_params import JointNoise, TrackerParams
 
 if TYPE_CHECKING:
     from drake_tracker.io.recording import RecordedRun
     from drake_tracker.io.stream import Event
-    from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
 
 #: The fit's initial spreads: a bias (rad), an offset's translation (m) and rotation (rad).
 BIAS_SCALE_RAD, OFFSET_SCALE_M, OFFSET_SCALE_RAD = np.radians(1.0), 0.005, np.radians(0.5)
-
 
 @dataclass(frozen=True)
 class CameraCalibration:
@@ -105,8 +104,6 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
     ``events`` (a recorded run's, a bag's: ``io/stream.py``), ``cameras`` each camera's
     intrinsics by name (see the module). ValueError for fewer than two cameras, an empty
     window, a camera without an image in it or one that sees no arm there."""
-    from drake_tracker.params.tracker_params import TrackerParams
-
     if len(cameras) < 2:
         raise ValueError(_ONE_CAMERA)
     if not (0.0 <= start_s < end_s):
@@ -137,9 +134,9 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
                            + [np.array([OFFSET_SCALE_M] * 3 + [OFFSET_SCALE_RAD] * 3)]
                            * len(layout.camera_joints))
     fit = fit_window(layout, images, start, scale, evaluations=evaluations, seed=seed)
-    head_pose = np.mean([window.reading_at(t) for t in np.linspace(start_s, end_s, 21)],
-                        axis=0)
-    offsets = _folded_offsets(model, layout, fit, head_pose)
+    mean_reading = np.mean([window.reading_at(t) for t in np.linspace(start_s, end_s, 21)],
+                           axis=0)
+    offsets = _folded_offsets(model, layout, fit, mean_reading)
     names = camera_only_joints(model)
     noise = joint_noise_for(params, list(model.joint_names), model.prismatic_joint_names,
                             model.virtual_joint_names)
