@@ -168,8 +168,10 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
         "calibrate-cameras", help="each camera's mounting error from a recorded run of "
                                   "several cameras",
         description="Fits every camera's six offsets (its mounting error) to the images of "
-                    "all cameras in a window where they see the arm, together: the tracker "
-                    "replays the run to the window's end and its estimate starts the fit "
+                    "all cameras in a window where they see the arm, together (the window "
+                    "given, or found: the first two seconds in which every camera's images "
+                    "all show the arm): the tracker replays the recording to the window's "
+                    "end and its estimate starts the fit "
                     "(drake_tracker/io/calibrate_run.py). Writes the tracker parameters "
                     "'camera_offsets', held ('estimate_camera_offset: false'), for "
                     "--params of later runs of the same cell (see "
@@ -199,10 +201,15 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
     add_lcm_track_arguments(p)
     p.add_argument("--out", required=True, metavar="FILE.yaml",
                    help="the tracker parameters to write (camera_offsets)")
-    p.add_argument("--from", dest="start_s", type=float, default=0.5, metavar="SECONDS",
-                   help="the window's start, run time (default: 0.5)")
-    p.add_argument("--to", dest="end_s", type=positive_seconds, default=2.5,
-                   metavar="SECONDS", help="the window's end (default: 2.5)")
+    p.add_argument("--from", dest="start_s", type=float, default=None, metavar="SECONDS",
+                   help="the window's start, in the recording's time (with --to; default: "
+                        "the first --window-s seconds, after every camera has said "
+                        "'tracking', in which every camera's images all show the arm)")
+    p.add_argument("--to", dest="end_s", type=positive_seconds, default=None,
+                   metavar="SECONDS", help="the window's end (with --from)")
+    p.add_argument("--window-s", type=positive_seconds, default=2.0, metavar="SECONDS",
+                   help="the length of the window found without --from and --to "
+                        "(default: 2)")
     p.add_argument("--images-per-camera", type=positive_int, default=10,
                    help="images of each camera the fit scores, spread over the window "
                         "(default: 10)")
@@ -213,7 +220,10 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
     def run(args):
         params = load_params_arg(args.params)
         out = check_new_file(args.out, ".yaml")
-        window = dict(start_s=args.start_s, end_s=args.end_s,
+        if (args.start_s is None) != (args.end_s is None):
+            raise UsageError("--from and --to go together (without them the window is "
+                             "found)")
+        window = dict(start_s=args.start_s, end_s=args.end_s, window_s=args.window_s,
                       images_per_camera=args.images_per_camera, evaluations=args.evaluations)
         check_lcm_flags(args)
         try:

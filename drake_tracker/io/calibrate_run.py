@@ -29,6 +29,7 @@ from drake_tracker.core.calibration.window_fit import (
     fit_window,
 )
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B
+from drake_tracker.core.robustness.health import HealthState
 from drake_tracker.core.sensors.depth_frames import depth_to_metres
 from drake_tracker.params.resolve import joint_noise_for
 from drake_tracker.params.tracker_params import JointNoise, TrackerParams
@@ -40,6 +41,12 @@ if TYPE_CHECKING:
 
 #: The fit's initial spreads: a bias (rad), an offset's translation (m) and rotation (rad).
 BIAS_SCALE_RAD, OFFSET_SCALE_M, OFFSET_SCALE_RAD = np.radians(1.0), 0.005, np.radians(0.5)
+#: The window's length when it is found (s): two seconds of every camera seeing the arm.
+WINDOW_S = 2.0
+
+_ONE_CAMERA = ("calibrate-cameras needs several cameras: with one, the arm's biases and "
+               "the camera's offsets explain its view together")
+
 
 @dataclass(frozen=True)
 class CameraCalibration:
@@ -76,7 +83,8 @@ class CameraCalibration:
 
 
 def calibrate_run(run: RecordedRun, params: TrackerParams | None = None, *,
-                  start_s: float = 0.5, end_s: float = 2.5, images_per_camera: int = 10,
+                  start_s: float | None = None, end_s: float | None = None,
+                  window_s: float = WINDOW_S, images_per_camera: int = 10,
                   evaluations: int = 8000, seed: int = 0,
                   model: TrackerModel | None = None) -> CameraCalibration:
     """:func:`calibrate_cameras` on a recorded run of several cameras."""
@@ -87,30 +95,39 @@ def calibrate_run(run: RecordedRun, params: TrackerParams | None = None, *,
         raise ValueError(_ONE_CAMERA)
     model = model if model is not None else model_for_run(run)
     return calibrate_cameras(run_events(run), model, run.intrinsics_by_camera, params,
-                             start_s=start_s, end_s=end_s,
+                             start_s=start_s, end_s=end_s, window_s=window_s,
                              images_per_camera=images_per_camera, evaluations=evaluations,
                              seed=seed)
 
 
-_ONE_CAMERA = ("calibrate-cameras needs several cameras: with one, the arm's biases and "
-               "the camera's offsets explain its view together")
 
 
 def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dict,
-                      params: TrackerParams | None = None, *, start_s: float = 0.5,
-                      end_s: float = 2.5, images_per_camera: int = 10,
-                      evaluations: int = 8000, seed: int = 0) -> CameraCalibration:
-    """Fits every camera's offsets to the images captured in [start_s, end_s] of
-    ``events`` (a recorded run's, a bag's: ``io/stream.py``), ``cameras`` each camera's
-    intrinsics by name (see the module). ValueError for fewer than two cameras, an empty
-    window, a camera without an image in it or one that sees no arm there."""
+                      params: TrackerParams | None = None, *, start_s: float | None = None,
+                      end_s: float | None = None, window_s: float = WINDOW_S,
+                      images_per_camera: int = 10, evaluations: int = 8000,
+                      seed: int = 0) -> CameraCalibration:
+    """Fits every camera's offsets to the images captured in a window of ``events`` (a
+    recorded run's, a bag's, a log's: ``io/stream.py``); ``cameras`` is each camera's
+    intrinsics by name (see the module). The window is [start_s, end_s], or without them
+    the first ``window_s`` seconds, after every camera has said ``tracking``, in which
+    every image of every camera (at least 3 of each) shows at least
+    ``health.min_robot_pixels`` of the arm unhidden where the tracker puts it.
+    ValueError for fewer than two cameras, no such window, a camera without an image in
+    it or one that sees no arm there."""
     if len(cameras) < 2:
         raise ValueError(_ONE_CAMERA)
-    if not (0.0 <= start_s < end_s):
+    if (start_s is None) != (end_s is None):
+        raise ValueError("give the window's start and end together, or neither (the first "
+                         f"{window_s:g} s in which every camera sees the arm)")
+    if start_s is not None and not (0.0 <= start_s < end_s):
         raise ValueError(f"the window must have 0 <= start < end, got {start_s}-{end_s} s")
+    if not (np.isfinite(window_s) and window_s > 0):
+        raise ValueError(f"the window's length must be > 0 s, got {window_s}")
     params = params if params is not None else TrackerParams()
-    window = _Window(start_s, end_s)
-    tracker = _tracked_until(window.collect(events), model, cameras, params, end_s)
+    window = _Window(start_s, end_s, window_s)
+    tracker = _replayed(window, events, model, cameras, params)
+    start_s, end_s = window.start_s, window.end_s
     layout = _layout(model, tracker.params)
     images, seen = [], {}
     offset_s = tracker.params.image.image_time_offset_s
@@ -159,14 +176,22 @@ def camera_only_joints(model: TrackerModel) -> list[str]:
 
 
 class _Window:
-    """What a stream shows of the window: every reading up to its end, and each
-    camera's images captured in it (depth in metres)."""
+    """What a stream shows of the window: every reading up to its end, each camera's
+    images captured in it (depth in metres), and, without given bounds, which images
+    showed the arm (``seen``) until every camera's did for ``length_s``."""
 
-    def __init__(self, start_s: float, end_s: float):
-        self.start_s, self.end_s = start_s, end_s
+    def __init__(self, start_s: float | None, end_s: float | None, length_s: float):
+        self.start_s, self.end_s, self.length_s = start_s, end_s, length_s
         self.reading_times: list[float] = []
         self.readings: list[np.ndarray] = []
         self.images: dict[str, list[tuple[float, np.ndarray]]] = {}
+        self.cameras: dict[tuple[float, int], str] = {}  # (capture, sequence) -> camera
+        self.seen: dict[str, list[tuple[float, bool]]] = {}
+        self.tracking_since: dict[str, float] = {}
+
+    @property
+    def given(self) -> bool:
+        return self.end_s is not None
 
     def collect(self, events: Iterable[Event]) -> Iterator[Event]:
         from drake_tracker.io.stream import ImageEvent, ReadingEvent
@@ -176,17 +201,75 @@ class _Window:
                 self.reading_times.append(event.time_s)
                 self.readings.append(np.asarray(event.positions, float))
             elif isinstance(event, ImageEvent) and event.camera is not None and (
-                    self.start_s <= event.capture_s <= self.end_s):
+                    not self.given or self.start_s <= event.capture_s <= self.end_s):
                 depth = event.depth
                 if np.asarray(depth).dtype == np.uint16:  # a 16-bit camera's millimetres
                     depth = depth_to_metres(depth, "16U_mm")
-                self.images.setdefault(event.camera, []).append((event.capture_s, depth))
+                mine = self.images.setdefault(event.camera, [])
+                mine.append((event.capture_s, depth))
+                if not self.given:  # keep what a window ending now could need
+                    self.cameras[(float(event.capture_s), int(event.sequence))] = event.camera
+                    while mine and mine[0][0] < event.capture_s - self.length_s - 1.0:
+                        mine.pop(0)
             yield event
+
+    def saw(self, tracker, frame, min_pixels: int) -> None:
+        """After the tracker took ``frame``: whether its camera's latest image showed the
+        arm. Ends the replay (``_WindowFoundError``) at the first time every camera's
+        images all did for ``length_s``, counted from when every camera had said
+        ``tracking`` (the estimate that starts the fit holds the arm)."""
+        camera = self.cameras.get((float(frame.capture_time_s), int(frame.sequence)))
+        if camera is None:
+            return
+        health = tracker.channel(camera).health
+        latest = health.latest
+        shown = latest is not None and latest.visible_robot_pixels >= min_pixels
+        self.seen.setdefault(camera, []).append((float(frame.capture_time_s), shown))
+        if health.state == HealthState.TRACKING:
+            self.tracking_since.setdefault(camera, float(frame.capture_time_s))
+        if len(self.tracking_since) < len(tracker.channels):
+            return
+        end = float(frame.capture_time_s)
+        start = end - self.length_s
+        if start < max(self.tracking_since.values()):
+            return
+        for name in tracker.channels:
+            inside = [ok for t, ok in self.seen.get(name, []) if start <= t <= end]
+            if len(inside) < 3 or not all(inside):
+                return
+        self.start_s, self.end_s = start, end
+        self.images = {name: [(t, d) for t, d in mine if start <= t <= end]
+                       for name, mine in self.images.items()}
+        raise _WindowFoundError
 
     def reading_at(self, t: float) -> np.ndarray:
         """The latest reading stamped at or before ``t`` (the first one before it)."""
         k = int(np.searchsorted(self.reading_times, t + 1e-9, side="right")) - 1
         return self.readings[max(k, 0)]
+
+
+class _WindowFoundError(Exception):
+    """Ends the replay at the end of the window found."""
+
+
+def _replayed(window: _Window, events: Iterable[Event], model: TrackerModel,
+              cameras: dict, params: TrackerParams):
+    """A tracker fed the stream to the window's end (given, or found)."""
+    from drake_tracker.io.stream import track_stream
+    from drake_tracker.tracker import Tracker
+
+    if window.given:
+        return _tracked_until(window.collect(events), model, cameras, params, window.end_s)
+    tracker = Tracker(model, params=params, cameras=cameras)
+    min_pixels = tracker.params.health.min_robot_pixels
+    try:
+        track_stream(window.collect(events), tracker,
+                     on_image=lambda trk, frame: window.saw(trk, frame, min_pixels))
+    except _WindowFoundError:
+        return tracker
+    raise ValueError(f"no {window.length_s:g} s in which every image of every camera shows "
+                     f"the arm (at least {min_pixels} pixels unhidden where the tracker "
+                     f"puts it): give the window (--from, --to)")
 
 
 def _tracked_until(events: Iterable[Event], model: TrackerModel, cameras: dict,

@@ -233,3 +233,21 @@ def test_a_window_in_which_a_camera_sees_no_arm_is_refused(recorded):
     with pytest.raises(ValueError, match="camera 'post_camera' sees at most 0 pixels"):
         calibrate_run(run, params, start_s=0.3, end_s=1.5, images_per_camera=3,
                       evaluations=200, model=model)
+
+
+def test_without_bounds_the_window_is_the_first_in_which_every_camera_sees_the_arm(
+        recorded):
+    """The window found lasts ``window_s`` inside the run, with images of both cameras;
+    a window longer than the run is a clear error, and so is half a window given."""
+    params = seeded_params(0)
+    params.image.min_image_interval_s = 0.1
+    result = calibrate_run(recorded, params, window_s=0.6, images_per_camera=3,
+                           evaluations=300)
+    start, end = result.window_s
+    assert end - start == pytest.approx(0.6)
+    assert 0.0 < start and end <= recorded.truth_times_s[-1]
+    assert result.images == {"camera": 3, "post_camera": 3}
+    with pytest.raises(ValueError, match="no 5 s in which every image of every camera"):
+        calibrate_run(recorded, params, window_s=5.0, evaluations=300)
+    with pytest.raises(ValueError, match="start and end together"):
+        calibrate_run(recorded, params, start_s=0.3, evaluations=300)
