@@ -330,11 +330,15 @@ def _layout(model: TrackerModel, params) -> WindowLayout:
 
 def _folded_offsets(model: TrackerModel, layout: WindowLayout, fit: WindowFit,
                     reading: np.ndarray) -> dict[str, np.ndarray]:
-    """Each camera's offsets that put it, with every robot joint at ``reading`` (no
-    bias), where the fit puts it (its biases and offsets) at that reading."""
+    """Each camera's offsets that put it, with the joints that move only cameras at
+    ``reading`` (no bias; they are trusted from now on), where the fit puts it (its
+    biases and offsets) at that reading. Every other joint keeps the fit's angle: a
+    camera on the arm keeps its offsets relative to its link, the arm's biases being
+    the tracker's to follow."""
     q_fit = layout.configurations(fit.theta, reading)[0]
     q_plain = q_fit.copy()
-    q_plain[layout.robot_indices] = reading
+    only = [model.joint_names.index(n) for n in camera_only_joints(model)]
+    q_plain[only] = reading[[list(layout.robot_indices).index(j) for j in only]]
     return {name: equivalent_offsets(model, name, q_fit, q_plain)
             for name in model.camera_names}
 

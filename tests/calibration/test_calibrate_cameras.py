@@ -251,3 +251,40 @@ def test_without_bounds_the_window_is_the_first_in_which_every_camera_sees_the_a
         calibrate_run(recorded, params, window_s=5.0, evaluations=300)
     with pytest.raises(ValueError, match="start and end together"):
         calibrate_run(recorded, params, start_s=0.3, evaluations=300)
+
+
+def test_a_camera_on_the_arm_keeps_its_offsets_and_the_heads_takes_the_heads_error():
+    """Folding takes only the joints that move a camera and not the hand (the head): a
+    camera on the arm's last link keeps the fit's offsets (the arm's biases are the
+    tracker's to follow), and the head camera, with the head at its readings, lands
+    where the fit's head bias put it (Drake's kinematics)."""
+    from drake_tracker.core.calibration.window_fit import WindowFit, WindowLayout
+    from drake_tracker.io.calibrate_run import _folded_offsets, camera_only_joints
+    from drake_tracker.robot.model import CameraMount, FrameOffset, robot_preset
+
+    config = robot_preset("apollo")
+    config.added_frames = {"wrist_nominal": FrameOffset(
+        parent="arm_link_7", xyz_m=[0.0, 0.05, 0.1], rpy_deg=[0.0, -90.0, 0.0])}
+    config.cameras = [CameraMount("camera", "camera_optical"),
+                      CameraMount("wrist", "wrist_nominal")]
+    model = build_tracker_model(config)
+    assert camera_only_joints(model) == ["head_pan", "head_tilt"]
+    robot = np.asarray(model.robot_joint_indices)
+    layout = WindowLayout(model.num_joints, robot, np.arange(len(robot)),
+                          {n: model.camera_joint_indices(n) for n in model.camera_names})
+    rng = np.random.default_rng(9)
+    theta = np.concatenate([rng.normal(0.0, 0.03, len(robot))]
+                           + [rng.normal(0.0, [0.01] * 3 + [0.02] * 3) for _ in range(2)])
+    fit = WindowFit(layout, theta, theta, 0.0, 0.0, 1)
+    reading = rng.normal(0.0, 0.3, len(robot))
+    folded = _folded_offsets(model, layout, fit, reading)
+    np.testing.assert_allclose(folded["wrist"], layout.offsets(theta, "wrist"), atol=1e-9)
+    q_fit = layout.configurations(theta, reading)[0]
+    q = q_fit.copy()
+    head = [model.joint_names.index(n) for n in ("head_pan", "head_tilt")]
+    q[head] = reading[[list(robot).index(j) for j in head]]
+    q[model.camera_joint_indices("camera")] = folded["camera"]
+    np.testing.assert_allclose(camera_world_pose(model, "camera", q).GetAsMatrix4(),
+                               camera_world_pose(model, "camera", q_fit).GetAsMatrix4(),
+                               atol=1e-9)
+    assert np.max(np.abs(folded["camera"] - layout.offsets(theta, "camera"))) > 1e-3
