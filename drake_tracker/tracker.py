@@ -42,7 +42,7 @@ from drake_tracker.core.image_step import (
 )
 from drake_tracker.core.robustness.health import TrackerHealth
 from drake_tracker.core.sensors.camera import CameraIntrinsics
-from drake_tracker.core.sensors.depth_frames import DepthFrame, depth_to_metres
+from drake_tracker.core.sensors.depth_frames import DepthFrame, in_metres
 from drake_tracker.core.sensors.depth_units import check_depth_units
 from drake_tracker.core.sensors.rate_limited_warning import RateLimitedWarning
 from drake_tracker.core.sensors.reading_gate import ReadingGate
@@ -181,8 +181,7 @@ class Tracker:
                               "(DepthFrame.empty()): no image yet", "empty placeholder frames")
         if channel.images is None:
             return False
-        if np.asarray(frame.depth_m).dtype == np.uint16:  # a 16-bit camera's millimetres
-            frame = replace(frame, depth_m=depth_to_metres(frame.depth_m, "16U_mm"))
+        frame = replace(frame, depth_m=in_metres(frame.depth_m))  # a 16-bit camera's mm
         check_depth_image(frame.depth_m, channel.intrinsics)  # before anything changes
         check_depth_units(frame.depth_m)
         if self.buffer is None:

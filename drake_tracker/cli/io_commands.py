@@ -228,9 +228,11 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
         check_lcm_flags(args)
         try:
             if args.bag is not None:
-                result = _calibrate_bag(args, params, window)
+                result = _calibrate_source(*_open_bag(args, params), params, window)
             elif args.lcm_log is not None:
-                result = _calibrate_lcm_log(args, params, window)
+                model = robot_model(args.robot, "--lcm-log")
+                result = _calibrate_source(model, open_lcm_log(args, params, model), params,
+                                           window)
             else:
                 if args.robot is not None:
                     raise UsageError("--robot is for --bag and --lcm-log: a recorded run "
@@ -249,22 +251,9 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _calibrate_bag(args, params, window: dict):
-    """``calibrate-cameras --bag``: the bag's events and camera models, as ``track``."""
-    model, source = _open_bag(args, params)
-    from drake_tracker.io.calibrate_run import calibrate_cameras
-
-    try:
-        return calibrate_cameras(source.events(), model, source.camera_models(), params,
-                                 **window)
-    finally:
-        source.close()
-
-
-def _calibrate_lcm_log(args, params, window: dict):
-    """``calibrate-cameras --lcm-log``: the log's events and cameras, as ``track``."""
-    model = robot_model(args.robot, "--lcm-log")
-    source = open_lcm_log(args, params, model)
+def _calibrate_source(model: TrackerModel, source, params, window: dict):
+    """``calibrate-cameras`` on an open bag or LCM log (``--bag``, ``--lcm-log``, opened
+    as ``track`` opens them): its events and camera models; the source is closed."""
     from drake_tracker.io.calibrate_run import calibrate_cameras
 
     try:

@@ -30,7 +30,7 @@ from drake_tracker.core.calibration.window_fit import (
 )
 from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B
 from drake_tracker.core.robustness.health import HealthState
-from drake_tracker.core.sensors.depth_frames import depth_to_metres
+from drake_tracker.core.sensors.depth_frames import in_metres
 from drake_tracker.params.resolve import joint_noise_for
 from drake_tracker.params.tracker_params import JointNoise, TrackerParams
 
@@ -100,8 +100,6 @@ def calibrate_run(run: RecordedRun, params: TrackerParams | None = None, *,
                              seed=seed)
 
 
-
-
 def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dict,
                       params: TrackerParams | None = None, *, start_s: float | None = None,
                       end_s: float | None = None, window_s: float = WINDOW_S,
@@ -153,8 +151,8 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
     fit = fit_window(layout, images, start, scale, evaluations=evaluations, seed=seed)
     mean_reading = np.mean([window.reading_at(t) for t in np.linspace(start_s, end_s, 21)],
                            axis=0)
-    offsets = _folded_offsets(model, layout, fit, mean_reading)
     names = camera_only_joints(model)
+    offsets = _folded_offsets(model, layout, fit, mean_reading, names)
     noise = joint_noise_for(params, list(model.joint_names), model.prismatic_joint_names,
                             model.virtual_joint_names)
     trusted = {n: replace(noise[model.joint_names.index(n)], has_bias=False) for n in names}
@@ -176,9 +174,10 @@ def camera_only_joints(model: TrackerModel) -> list[str]:
 
 
 class _Window:
-    """What a stream shows of the window: every reading up to its end, each camera's
-    images captured in it (depth in metres), and, without given bounds, which images
-    showed the arm (``seen``) until every camera's did for ``length_s``."""
+    """What a stream shows of the window: every reading up to its end and each camera's
+    images captured in it that the tracker took (depth in metres); without given
+    bounds, which of them showed the arm (``seen``), until every camera's did for
+    ``length_s``."""
 
     def __init__(self, start_s: float | None, end_s: float | None, length_s: float):
         self.start_s, self.end_s, self.length_s = start_s, end_s, length_s
@@ -194,52 +193,55 @@ class _Window:
         return self.end_s is not None
 
     def collect(self, events: Iterable[Event]) -> Iterator[Event]:
+        """``events`` as they are, their readings kept; a given window's images kept
+        (captured in it, whenever they arrive), the others' cameras noted for
+        :meth:`took`."""
         from drake_tracker.io.stream import ImageEvent, ReadingEvent
 
         for event in events:
             if isinstance(event, ReadingEvent) and np.all(np.isfinite(event.positions)):
                 self.reading_times.append(event.time_s)
                 self.readings.append(np.asarray(event.positions, float))
-            elif isinstance(event, ImageEvent) and event.camera is not None and (
-                    not self.given or self.start_s <= event.capture_s <= self.end_s):
-                depth = event.depth
-                if np.asarray(depth).dtype == np.uint16:  # a 16-bit camera's millimetres
-                    depth = depth_to_metres(depth, "16U_mm")
-                mine = self.images.setdefault(event.camera, [])
-                mine.append((event.capture_s, depth))
-                if not self.given:  # keep what a window ending now could need
+            elif isinstance(event, ImageEvent) and event.camera is not None:
+                if not self.given:
                     self.cameras[(float(event.capture_s), int(event.sequence))] = event.camera
-                    while mine and mine[0][0] < event.capture_s - self.length_s - 1.0:
-                        mine.pop(0)
+                elif self.start_s <= event.capture_s <= self.end_s:
+                    self.images.setdefault(event.camera, []).append(
+                        (event.capture_s, in_metres(event.depth)))
             yield event
 
-    def saw(self, tracker, frame, min_pixels: int) -> None:
-        """After the tracker took ``frame``: whether its camera's latest image showed the
-        arm. Ends the replay (``_WindowFoundError``) at the first time every camera's
-        images all did for ``length_s``, counted from when every camera had said
-        ``tracking`` (the estimate that starts the fit holds the arm)."""
-        camera = self.cameras.get((float(frame.capture_time_s), int(frame.sequence)))
+    def took(self, tracker, frame, min_pixels: int) -> None:
+        """Without given bounds, after the tracker took ``frame`` (``track_stream``'s
+        ``on_image``): the image kept while a window ending now could need it, and
+        whether its camera's latest image showed the arm. Ends the replay
+        (``_WindowFoundError``) at the first time every camera's images all did for
+        ``length_s``, counted from when every camera had said ``tracking`` (the estimate
+        that starts the fit holds the arm)."""
+        t = float(frame.capture_time_s)
+        camera = self.cameras.pop((t, int(frame.sequence)), None)
         if camera is None:
             return
+        mine = self.images.setdefault(camera, [])
+        mine.append((t, in_metres(frame.depth_m)))
+        while mine[0][0] < t - self.length_s - 1.0:
+            mine.pop(0)
         health = tracker.channel(camera).health
-        latest = health.latest
-        shown = latest is not None and latest.visible_robot_pixels >= min_pixels
-        self.seen.setdefault(camera, []).append((float(frame.capture_time_s), shown))
+        shown = health.latest is not None and health.latest.visible_robot_pixels >= min_pixels
+        self.seen.setdefault(camera, []).append((t, shown))
         if health.state == HealthState.TRACKING:
-            self.tracking_since.setdefault(camera, float(frame.capture_time_s))
+            self.tracking_since.setdefault(camera, t)
         if len(self.tracking_since) < len(tracker.channels):
             return
-        end = float(frame.capture_time_s)
-        start = end - self.length_s
+        start = t - self.length_s
         if start < max(self.tracking_since.values()):
             return
         for name in tracker.channels:
-            inside = [ok for t, ok in self.seen.get(name, []) if start <= t <= end]
+            inside = [ok for s, ok in self.seen.get(name, []) if start <= s <= t]
             if len(inside) < 3 or not all(inside):
                 return
-        self.start_s, self.end_s = start, end
-        self.images = {name: [(t, d) for t, d in mine if start <= t <= end]
-                       for name, mine in self.images.items()}
+        self.start_s, self.end_s = start, t
+        self.images = {name: [(s, d) for s, d in images if start <= s <= t]
+                       for name, images in self.images.items()}
         raise _WindowFoundError
 
     def reading_at(self, t: float) -> np.ndarray:
@@ -254,43 +256,39 @@ class _WindowFoundError(Exception):
 
 def _replayed(window: _Window, events: Iterable[Event], model: TrackerModel,
               cameras: dict, params: TrackerParams):
-    """A tracker fed the stream to the window's end (given, or found)."""
-    from drake_tracker.io.stream import track_stream
+    """A tracker fed the stream to the window's end (given: every event that arrived by
+    it; found: until it is found), the window's images kept as the tracker took them."""
+    from drake_tracker.io.stream import ImageEvent, ReadingEvent, track_stream
     from drake_tracker.tracker import Tracker
 
-    if window.given:
-        return _tracked_until(window.collect(events), model, cameras, params, window.end_s)
     tracker = Tracker(model, params=params, cameras=cameras)
     min_pixels = tracker.params.health.min_robot_pixels
+    stream = window.collect(events)
+    if window.given:
+        end_s = window.end_s
+
+        def arrived(event) -> bool:
+            if isinstance(event, ReadingEvent):
+                return event.time_s <= end_s
+            if isinstance(event, ImageEvent):
+                return (event.capture_s if event.arrival_s is None
+                        else event.arrival_s) <= end_s
+            return True
+
+        stream = (e for e in itertools.takewhile(lambda e: _before(e, end_s + 1.0), stream)
+                  if arrived(e))
     try:
-        track_stream(window.collect(events), tracker,
-                     on_image=lambda trk, frame: window.saw(trk, frame, min_pixels))
+        track_stream(stream, tracker,
+                     on_image=lambda trk, frame: window.took(trk, frame, min_pixels))
     except _WindowFoundError:
+        return tracker
+    if window.given:
+        if not tracker.started:
+            raise ValueError(f"no joint reading by {end_s} s: the tracker did not start")
         return tracker
     raise ValueError(f"no {window.length_s:g} s in which every image of every camera shows "
                      f"the arm (at least {min_pixels} pixels unhidden where the tracker "
                      f"puts it): give the window (--from, --to)")
-
-
-def _tracked_until(events: Iterable[Event], model: TrackerModel, cameras: dict,
-                   params: TrackerParams, end_s: float):
-    """A tracker fed every event that arrived by ``end_s``."""
-    from drake_tracker.io.stream import ImageEvent, ReadingEvent, track_stream
-    from drake_tracker.tracker import Tracker
-
-    def arrived(event) -> bool:
-        if isinstance(event, ReadingEvent):
-            return event.time_s <= end_s
-        if isinstance(event, ImageEvent):
-            return (event.capture_s if event.arrival_s is None else event.arrival_s) <= end_s
-        return True
-
-    tracker = Tracker(model, params=params, cameras=cameras)
-    stream = itertools.takewhile(lambda e: _before(e, end_s + 1.0), events)
-    track_stream((e for e in stream if arrived(e)), tracker)
-    if not tracker.started:
-        raise ValueError(f"no joint reading by {end_s} s: the tracker did not start")
-    return tracker
 
 
 def _before(event, limit_s: float) -> bool:
@@ -329,15 +327,15 @@ def _layout(model: TrackerModel, params) -> WindowLayout:
 
 
 def _folded_offsets(model: TrackerModel, layout: WindowLayout, fit: WindowFit,
-                    reading: np.ndarray) -> dict[str, np.ndarray]:
-    """Each camera's offsets that put it, with the joints that move only cameras at
-    ``reading`` (no bias; they are trusted from now on), where the fit puts it (its
-    biases and offsets) at that reading. Every other joint keeps the fit's angle: a
-    camera on the arm keeps its offsets relative to its link, the arm's biases being
-    the tracker's to follow."""
+                    reading: np.ndarray, camera_only: list[str]) -> dict[str, np.ndarray]:
+    """Each camera's offsets that put it, with the joints that move only cameras
+    (``camera_only``: :func:`camera_only_joints`) at ``reading`` (no bias; they are
+    trusted from now on), where the fit puts it (its biases and offsets) at that
+    reading. Every other joint keeps the fit's angle: a camera on the arm keeps its
+    offsets relative to its link, the arm's biases being the tracker's to follow."""
     q_fit = layout.configurations(fit.theta, reading)[0]
     q_plain = q_fit.copy()
-    only = [model.joint_names.index(n) for n in camera_only_joints(model)]
+    only = [model.joint_names.index(n) for n in camera_only]
     q_plain[only] = reading[[list(layout.robot_indices).index(j) for j in only]]
     return {name: equivalent_offsets(model, name, q_fit, q_plain)
             for name in model.camera_names}

@@ -277,7 +277,7 @@ def test_a_camera_on_the_arm_keeps_its_offsets_and_the_heads_takes_the_heads_err
                            + [rng.normal(0.0, [0.01] * 3 + [0.02] * 3) for _ in range(2)])
     fit = WindowFit(layout, theta, theta, 0.0, 0.0, 1)
     reading = rng.normal(0.0, 0.3, len(robot))
-    folded = _folded_offsets(model, layout, fit, reading)
+    folded = _folded_offsets(model, layout, fit, reading, camera_only_joints(model))
     np.testing.assert_allclose(folded["wrist"], layout.offsets(theta, "wrist"), atol=1e-9)
     q_fit = layout.configurations(theta, reading)[0]
     q = q_fit.copy()

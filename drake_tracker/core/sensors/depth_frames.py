@@ -64,6 +64,14 @@ def depth_to_metres(pixels: np.ndarray, encoding: str) -> np.ndarray:
     return depth
 
 
+def in_metres(depth: np.ndarray) -> np.ndarray:
+    """``depth`` as float metres: a 16-bit camera's millimetres converted
+    (:func:`depth_to_metres`, ``16U_mm``), anything else as it is."""
+    if np.asarray(depth).dtype == np.uint16:
+        return depth_to_metres(depth, "16U_mm")
+    return depth
+
+
 def image_time(frame: DepthFrame, params: ResolvedParams) -> float:
     """The time t' (s) an image is applied at: its capture stamp minus the configured
     offset (``image.image_time_offset_s``)."""
