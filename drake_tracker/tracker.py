@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.core.calibration.online import SelfCalibration
 from drake_tracker.core.cameras import (
     CameraChannel,
     another_camera_tracks,
@@ -36,6 +37,7 @@ from drake_tracker.core.filter.start import full_reading, new_belief_buffer, sta
 from drake_tracker.core.image_processor import ImageProcessor
 from drake_tracker.core.image_step import (
     ImagePacing,
+    calibrate_after,
     conclude_image,
     judge_stamp,
     place_image,
@@ -52,6 +54,7 @@ from drake_tracker.params.resolve import resolve_tracker_params
 if TYPE_CHECKING:
     from pydrake.systems.sensors import CameraInfo
 
+    from drake_tracker.core.calibration.online import HeldCameras
     from drake_tracker.core.resolved_params import ResolvedParams
     from drake_tracker.params.tracker_params import TrackerParams
     from drake_tracker.robot.model import TrackerModel
@@ -100,6 +103,11 @@ class Tracker:
         self.num_images_skipped = 0
         stamps = self.params.timestamps
         self.readings = ReadingGate(stamps, model.robot_joint_names, log)
+        #: Several cameras calibrate themselves once (``core/calibration/online.py``).
+        self.calibration: SelfCalibration | None = None
+        if self.params.camera_calibration and list(self.channels) == model.camera_names \
+                and all(c.images for c in self.channels.values()):
+            self.calibration = SelfCalibration()
         self.warnings = RateLimitedWarning(log)
         if not self.params.use_joint_readings:
             self.buffer = new_belief_buffer(self.params, 0.0, None)
@@ -208,11 +216,15 @@ class Tracker:
                                          channel.pacing.jump_window_s(t, health), health,
                                          another_camera_tracks(
                                              {n: c.health for n, c in self.channels.items()},
-                                             channel.name))
+                                             channel.name),
+                                         held=self.held)
         channel.pacing = channel.pacing.taken_up(t, self.params.image.min_image_interval_s)
         self.last_result = outcome.result
         verdict = conclude_image(outcome, health, self.params.health)
         channel.health = verdict.health
+        self.calibration = calibrate_after(
+            self.calibration, channel.name, t, frame, anchor.prior, verdict.health,
+            {n: c.images for n, c in self.channels.items()}, self.model, self.params)
         if verdict.observation is None:
             return self._skip(frame, channel, verdict.problem, verdict.kind)
         self.buffer.add_image_observation(anchor, verdict.observation)
@@ -227,6 +239,11 @@ class Tracker:
         self.warnings.warn(kind, f"image {frame.sequence} skipped: {problem}")
         self.num_images_skipped += 1
         return False
+
+    @property
+    def held(self) -> HeldCameras | None:
+        """What the cameras' calibration holds (None: not calibrated)."""
+        return None if self.calibration is None else self.calibration.held
 
     @property
     def started(self) -> bool:

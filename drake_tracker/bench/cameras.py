@@ -62,7 +62,9 @@ def image_update_cost(run: RecordedRun, params: TrackerParams) -> dict:
             "update_ms_median": 1e3 * float(np.median(updates)),
             "update_ms_mean": 1e3 * float(np.mean(updates)),
             "update_s_per_s": float(np.sum(updates)) / run.duration_s,
-            "tracking_wall_s_per_s": wall / run.duration_s}
+            "tracking_wall_s_per_s": wall / run.duration_s,
+            # The cameras' calibration (core/calibration/online.py): once, on one image.
+            "calibration_fit_s": None if tracker.held is None else tracker.held.fit_wall_s}
 
 
 def bench_camera_count(params: TrackerParams, duration_s: float) -> dict:
@@ -90,4 +92,7 @@ def format_camera_count(result: dict) -> str:
             f"  two cameras / one camera: {result['two_over_one_per_image']:.2f} per image "
             f"(target ~1); {result['two_over_one_per_s']:.2f} per second of data (each "
             f"camera is paced at image.min_image_interval_s: {two['updates']} updates "
-            f"against {one['updates']})")
+            f"against {one['updates']})"
+            + ("" if two["calibration_fit_s"] is None else
+               f"\n  the cameras' calibration: {two['calibration_fit_s']:.1f} s once, on the "
+               "image that completed its window (not in the figures above)"))

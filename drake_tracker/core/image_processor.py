@@ -54,6 +54,7 @@ from drake_tracker.core.sensors.depth_frames import DepthFrame, image_time
 from drake_tracker.core.sensors.depth_units import check_depth_units
 
 if TYPE_CHECKING:
+    from drake_tracker.core.calibration.online import HeldCameras
     from drake_tracker.robot.model import TrackerModel
 
 log = logging.getLogger(__name__)
@@ -176,18 +177,19 @@ class ImageProcessor:
         return -np.expm1(-self._jump_rate * window)
 
     def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf,
-                health: TrackerHealth | None = None,
-                others_track: bool = False) -> ImageOutcome:
+                health: TrackerHealth | None = None, others_track: bool = False,
+                held: HeldCameras | None = None) -> ImageOutcome:
         """The image's observation relative to ``prior`` (None if it has no valid pixel),
         and its consistency with the estimate; ``elapsed_s`` is the time since the
         previous applied image; ``health`` the tracker's before this image (default: it
         holds the arm): until the arm is ``acquired``, the update searches with
         ``image.acquisition_num_particles``; ``others_track``: another of several
-        cameras says ``tracking`` (``cameras.another_camera_tracks``). Its time goes
-        into ``times``."""
+        cameras says ``tracking`` (``cameras.another_camera_tracks``); ``held``: the
+        cameras calibrated (``core/calibration/online.py``), their joints pinned. Its
+        time goes into ``times``."""
         start, update_before = time.perf_counter(), self.times.update_s
         try:
-            return self._observe(frame, prior, elapsed_s, health, others_track)
+            return self._observe(frame, prior, elapsed_s, health, others_track, held)
         finally:
             times = self.times
             times.images += 1
@@ -195,8 +197,12 @@ class ImageProcessor:
                                                                  - update_before)
 
     def _observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float,
-                 health: TrackerHealth | None, others_track: bool) -> ImageOutcome:
+                 health: TrackerHealth | None, others_track: bool, held) -> ImageOutcome:
         health = TrackerHealth(acquired=True) if health is None else health
+        restart, blocks = self.restart, None  # a forced restart: to the tracker's start
+        if held is not None:
+            prior, restart = held.prior(prior), held.restart(restart)
+            blocks = held.blocks(self.update.blocks)
         acquired = health.acquired
         start = time.perf_counter()
         observation = self.update.prepare(frame.depth_m)
@@ -214,7 +220,6 @@ class ImageProcessor:
         # Never lost for good: the belief restarts from the encoders (as at the tracker's
         # start: see ``restart_reason``) before the update.
         restarted, misplaced = False, False
-        restart = self.restart  # a forced restart: to the tracker's start, nominal camera
         if self.params.use_joint_readings:
             candidate = restart.apply(prior)
             rendered_enc = self.update.renderer.render(candidate[MEAN_A][None])[0]
@@ -236,7 +241,7 @@ class ImageProcessor:
         if self.several_cameras and not restarted and (
                 predicted.visible_robot_pixels < self.params.health.min_robot_pixels
                 or (others_track and predicted.occluded > 0.5)):
-            remounted = self.search.remounted(prior, observed, predicted)
+            remounted = None if held else self.search.remounted(prior, observed, predicted)
             if remounted is None:
                 return ImageOutcome(None, None, predicted, challenger=health.challenger,
                                     skip_reason=self._out_of_view_reason(predicted))
@@ -275,7 +280,7 @@ class ImageProcessor:
         start = time.perf_counter()
         result = self.update(prior, observation, rng, jumps, self._jump_std,
                              None if acquired else self.params.image.acquisition_num_particles,
-                             coarse_sweeps=acquired, widened=never_held)
+                             coarse_sweeps=acquired, widened=never_held, blocks=blocks)
         self.times.update_s += time.perf_counter() - start
         if result is None:
             return ImageOutcome(None, None, None)
@@ -296,7 +301,7 @@ class ImageProcessor:
         # others hold kept, once this camera has held the arm (at the start its pose is
         # the start-up search's).
         if overrule is None and surprising and self.several_cameras and \
-                self.params.use_joint_readings and not restarted and \
+                self.params.use_joint_readings and not restarted and held is None and \
                 np.isfinite(health.confirmed_s):
             overrule = self.search.remount_search(plain, prior, result, predicted.time_s,
                                                   rng, frame.sequence)
@@ -320,21 +325,20 @@ class ImageProcessor:
             observation = AngleObservation.from_posterior(prior, result.mean, variance)
         if restarted:
             observation = replace(observation, restart=restart)
+        innovation = image_innovation(prior, observation, self._robot)
+        if held is not None:
+            observation = held.pin(observation, prior)
         return ImageOutcome(observation, result, predicted, restarted, misplaced,
-                            challenger=challenger,
-                            innovation=image_innovation(prior, observation, self._robot))
+                            challenger=challenger, innovation=innovation)
 
     def _out_of_view_reason(self, predicted: ImageConsistency) -> str:
         """Why an image of one of several cameras that shows fewer than
         ``health.min_robot_pixels`` of the arm unhidden where the estimate puts it is not
-        applied. Such an image only says where the arm is not: every sample that keeps
-        the arm out of its view scores alike, one that brings it into view loses, and the
-        moment-matched posterior is then pushed away from the view, onto the joints only
-        this camera sees (its six offset joints, a pan-tilt head). Measured on
-        in-out-in-2cam/none seed 0, the head camera's pose drifted from 0.5 to 4.4 deg
-        in 5 s with the hand out of its view while the post camera held the hand within
-        8 mm; the hand in the head camera's frame went from 1 to 97 mm. With one camera
-        the tracker keeps that information (its restart and out-of-view logic use it).
+        applied. Such an image only says where the arm is not, and the posterior is
+        pushed away from the view, onto the joints only this camera sees (its offsets, a
+        pan-tilt head): on in-out-in-2cam/none seed 0 the head camera's pose drifted 0.5
+        to 4.4 deg in 5 s with the hand out of its view (the hand in its frame 1 to 97
+        mm off). With one camera its restart and out-of-view logic use that information.
 
         Nor one that shows more of the arm hidden than unhidden while another camera
         tracks it. Measured on occlusion-lasting-2cam at its full 30 s: the head camera's
@@ -381,11 +385,9 @@ class ImageProcessor:
                          predicted: ImageConsistency):
         """The observation with the per-pixel occlusion estimate read at ``rendered``.
 
-        Which pixels hide the robot is read at the prior mean: only meaningful while the
-        image does not contradict it. After a bias step, or from a wrong start, the true
-        arm in front of the prior's would be taken for an occluder, and the arm could then
-        hide behind the scene at no cost: measured, s-full-arm with 8.6 deg of constant
-        bias diverged to 0.9 m without this condition, and converged with it."""
+        Read at the prior mean: only meaningful while the image does not contradict it
+        (after a bias step the true arm in front of the prior's would be an occluder:
+        s-full-arm, 8.6 deg of constant bias, diverged to 0.9 m without the condition)."""
         image = self.params.image
         if predicted.see_through > self.params.health.max_see_through:
             return observation

@@ -44,9 +44,13 @@ from drake_tracker.core.sensors.timestamps import (
 )
 
 if TYPE_CHECKING:
+    from drake_tracker.core.calibration.online import SelfCalibration
     from drake_tracker.core.filter.belief_buffer import BeliefBuffer, ImageAnchor
     from drake_tracker.core.image_processor import ImageOutcome
     from drake_tracker.core.resolved_params import ResolvedParams
+    from drake_tracker.robot.model import TrackerModel
+
+_log = logging.getLogger(__name__)
 
 
 def judge_stamp(frame: DepthFrame, clock: StreamClock, buffer: BeliefBuffer,
@@ -143,3 +147,30 @@ def conclude_image(outcome: ImageOutcome, health: TrackerHealth,
     after = next_health(health, outcome.consistency, params, outcome.restarted,
                         outcome.misplaced, outcome.challenger, outcome.innovation)
     return ImageVerdict(outcome.observation, after)
+
+
+def calibrate_after(calibration: SelfCalibration | None, camera: str, t: float,
+                    frame: DepthFrame, prior: np.ndarray, health: TrackerHealth,
+                    processors: dict, model: TrackerModel,
+                    params: ResolvedParams) -> SelfCalibration | None:
+    """After step 5, with several cameras (``core/calibration/online.py``): the
+    calibration's next state once camera ``camera``'s image at ``t`` (its anchor's
+    ``prior``, the camera's ``health`` after it) was taken; the image that completes the
+    window runs the fit. ``processors``: each camera's ``ImageProcessor``."""
+    if calibration is None or calibration.held is not None:
+        return calibration
+    window_s = params.camera_calibration.window_s
+    calibration = calibration.took(camera, t, frame.depth_m, prior, health,
+                                   processors[camera].update,
+                                   params.health.min_robot_pixels, window_s)
+    start = calibration.window(t, list(processors), window_s)
+    if start is None:
+        return calibration
+    calibration = calibration.calibrated(
+        model, params, {name: p.update for name, p in processors.items()}, prior, start, t)
+    held = calibration.held
+    _log.info("the cameras calibrated on their images of %.2f-%.2f s (log-likelihood "
+              "%.0f -> %.0f, %d evaluations, %.1f s); their offsets and the joints that "
+              "move only them are held from now on", start, t, *held.log_likelihood,
+              held.evaluations, held.fit_wall_s)
+    return calibration

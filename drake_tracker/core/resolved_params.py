@@ -15,6 +15,7 @@ from functools import cached_property
 
 import numpy as np
 
+from drake_tracker.core.calibration.calibration_params import SelfCalibrationParams
 from drake_tracker.core.cpf.image_params import ImageParams
 from drake_tracker.core.filter.kalman import KalmanBankParams
 from drake_tracker.core.robustness.health import HealthParams
@@ -78,6 +79,9 @@ class ResolvedParams:
     #: cameras' offset joints and the joints that move only another camera) of each
     #: camera; empty with one camera. A restart from a camera's image keeps them.
     camera_left_joints: tuple[tuple[str, np.ndarray], ...] = ()
+    #: Several cameras calibrate themselves once while the tracker runs
+    #: (``core/calibration/online.py``); None: they do not.
+    camera_calibration: SelfCalibrationParams | None = None
 
     def left_joints_for(self, camera: str | None) -> np.ndarray:
         """Indices of the joints camera ``camera``'s images leave as they are (empty

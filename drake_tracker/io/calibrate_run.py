@@ -20,15 +20,16 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
-from pydrake.math import RollPitchYaw
 
-from drake_tracker.core.calibration.window_fit import (
-    WindowFit,
-    WindowImage,
-    WindowLayout,
-    fit_window,
+from drake_tracker.core.calibration.calibration_params import SelfCalibrationParams
+from drake_tracker.core.calibration.fold import (
+    belief_theta,
+    calibration_layout,
+    camera_only_joints,
+    fit_cameras,
 )
-from drake_tracker.core.filter.kalman import MEAN_A, MEAN_B
+from drake_tracker.core.calibration.online import WINDOW_S, found_window
+from drake_tracker.core.calibration.window_fit import WindowFit, WindowImage, WindowLayout
 from drake_tracker.core.robustness.health import HealthState
 from drake_tracker.core.sensors.depth_frames import in_metres
 from drake_tracker.params.resolve import joint_noise_for
@@ -38,11 +39,6 @@ if TYPE_CHECKING:
     from drake_tracker.io.recording import RecordedRun
     from drake_tracker.io.stream import Event
     from drake_tracker.robot.model import TrackerModel
-
-#: The fit's initial spreads: a bias (rad), an offset's translation (m) and rotation (rad).
-BIAS_SCALE_RAD, OFFSET_SCALE_M, OFFSET_SCALE_RAD = np.radians(1.0), 0.005, np.radians(0.5)
-#: The window's length when it is found (s): two seconds of every camera seeing the arm.
-WINDOW_S = 2.0
 
 _ONE_CAMERA = ("calibrate-cameras needs several cameras: with one, the arm's biases and "
                "the camera's offsets explain its view together")
@@ -122,11 +118,13 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
         raise ValueError(f"the window must have 0 <= start < end, got {start_s}-{end_s} s")
     if not (np.isfinite(window_s) and window_s > 0):
         raise ValueError(f"the window's length must be > 0 s, got {window_s}")
-    params = params if params is not None else TrackerParams()
+    # The replay finds the window itself: it does not calibrate online as well.
+    params = replace(params if params is not None else TrackerParams())
+    params.camera_calibration = SelfCalibrationParams(window_s=0.0)
     window = _Window(start_s, end_s, window_s)
     tracker = _replayed(window, events, model, cameras, params)
     start_s, end_s = window.start_s, window.end_s
-    layout = _layout(model, tracker.params)
+    layout = calibration_layout(model, tracker.params)
     images, seen = [], {}
     offset_s = tracker.params.image.image_time_offset_s
     for name in model.camera_names:
@@ -142,35 +140,17 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
             images.append(WindowImage(name, window.reading_at(capture_s - offset_s),
                                       _scorer(update, observation)))
     _, belief = tracker.buffer.present()
-    start = np.concatenate([belief[MEAN_B][model.robot_joint_indices][layout.bias_joints]]
-                           + [belief[MEAN_A][j] for j in layout.camera_joints.values()])
-    _require_views(tracker, layout, images, start, tracker.params.health.min_robot_pixels)
-    scale = np.concatenate([np.full(len(layout.bias_joints), BIAS_SCALE_RAD)]
-                           + [np.array([OFFSET_SCALE_M] * 3 + [OFFSET_SCALE_RAD] * 3)]
-                           * len(layout.camera_joints))
-    fit = fit_window(layout, images, start, scale, evaluations=evaluations, seed=seed)
+    _require_views(tracker, layout, images, belief_theta(model, layout, belief),
+                   tracker.params.health.min_robot_pixels)
     mean_reading = np.mean([window.reading_at(t) for t in np.linspace(start_s, end_s, 21)],
                            axis=0)
+    offsets, fit = fit_cameras(model, tracker.params, images, belief, mean_reading,
+                               evaluations=evaluations, seed=seed)
     names = camera_only_joints(model)
-    offsets = _folded_offsets(model, layout, fit, mean_reading, names)
     noise = joint_noise_for(params, list(model.joint_names), model.prismatic_joint_names,
                             model.virtual_joint_names)
     trusted = {n: replace(noise[model.joint_names.index(n)], has_bias=False) for n in names}
     return CameraCalibration(offsets, fit, (start_s, end_s), seen, trusted)
-
-
-def camera_only_joints(model: TrackerModel) -> list[str]:
-    """The robot joints that move a camera and not the hand (a pan-tilt head): their
-    constant error and a mount's are one rigid transform, folded into the offsets."""
-    plant = model.plant
-    hand = model.end_effector_frame.body().index()
-    cameras = {model.camera(name).frame.body().index() for name in model.camera_names}
-    out = []
-    for name in model.robot_joint_names:
-        moved = set(plant.GetBodiesKinematicallyAffectedBy([plant.GetJointByName(name).index()]))
-        if moved & cameras and hand not in moved:
-            out.append(name)
-    return out
 
 
 class _Window:
@@ -230,15 +210,10 @@ class _Window:
         self.seen.setdefault(camera, []).append((t, shown))
         if health.state == HealthState.TRACKING:
             self.tracking_since.setdefault(camera, t)
-        if len(self.tracking_since) < len(tracker.channels):
+        start = found_window(self.seen, self.tracking_since, list(tracker.channels), t,
+                             self.length_s)
+        if start is None:
             return
-        start = t - self.length_s
-        if start < max(self.tracking_since.values()):
-            return
-        for name in tracker.channels:
-            inside = [ok for s, ok in self.seen.get(name, []) if start <= s <= t]
-            if len(inside) < 3 or not all(inside):
-                return
         self.start_s, self.end_s = start, t
         self.images = {name: [(s, d) for s, d in images if start <= s <= t]
                        for name, images in self.images.items()}
@@ -316,57 +291,3 @@ def _require_views(tracker, layout: WindowLayout, images: list[WindowImage],
 
 def _scorer(update, observation):
     return lambda q: update.log_likelihood(q, observation)
-
-
-def _layout(model: TrackerModel, params) -> WindowLayout:
-    """Every robot joint with a bias (the camera chains' included: folded afterwards)."""
-    has_bias = params.joints.has_bias[model.robot_joint_indices]
-    return WindowLayout(model.num_joints, np.asarray(model.robot_joint_indices),
-                        np.flatnonzero(has_bias),
-                        {name: model.camera_joint_indices(name) for name in model.camera_names})
-
-
-def _folded_offsets(model: TrackerModel, layout: WindowLayout, fit: WindowFit,
-                    reading: np.ndarray, camera_only: list[str]) -> dict[str, np.ndarray]:
-    """Each camera's offsets that put it, with the joints that move only cameras
-    (``camera_only``: :func:`camera_only_joints`) at ``reading`` (no bias; they are
-    trusted from now on), where the fit puts it (its biases and offsets) at that
-    reading. Every other joint keeps the fit's angle: a camera on the arm keeps its
-    offsets relative to its link, the arm's biases being the tracker's to follow."""
-    q_fit = layout.configurations(fit.theta, reading)[0]
-    q_plain = q_fit.copy()
-    only = [model.joint_names.index(n) for n in camera_only]
-    q_plain[only] = reading[[list(layout.robot_indices).index(j) for j in only]]
-    return {name: equivalent_offsets(model, name, q_fit, q_plain)
-            for name in model.camera_names}
-
-
-def equivalent_offsets(model: TrackerModel, camera: str, q_target: np.ndarray,
-                       q: np.ndarray) -> np.ndarray:
-    """(6,) the offsets of camera ``camera`` that put it, at configuration ``q`` (its
-    own offsets replaced), where it is at ``q_target``: Gauss-Newton on the pose error
-    (translation, roll-pitch-yaw), from ``q_target``'s offsets, with Drake's kinematics.
-    """
-    plant = model.plant
-    context = plant.CreateDefaultContext()
-    frame, joints = model.camera(camera).frame, model.camera_joint_indices(camera)
-    plant.SetPositions(context, q_target)
-    target = plant.CalcRelativeTransform(context, plant.world_frame(), frame)
-    q = np.array(q, float)
-
-    def residual(o: np.ndarray) -> np.ndarray:
-        q[joints] = o
-        plant.SetPositions(context, q)
-        error = plant.CalcRelativeTransform(context, plant.world_frame(), frame).inverse() \
-            @ target
-        return np.concatenate([error.translation(), RollPitchYaw(error.rotation()).vector()])
-
-    o = np.array(q_target[joints], float)
-    for _ in range(10):  # the map is nearly linear over degrees: a few steps
-        r = residual(o)
-        jacobian = np.column_stack([(residual(o + 1e-6 * e) - r) / 1e-6 for e in np.eye(6)])
-        step = np.linalg.lstsq(jacobian, -r, rcond=None)[0]
-        o = o + step
-        if np.max(np.abs(step)) < 1e-10:
-            break
-    return o

@@ -25,6 +25,7 @@ from drake_tracker.metrics import format_report_table, method_report
 from drake_tracker.tracker import Tracker
 
 if TYPE_CHECKING:
+    from drake_tracker.core.calibration.online import HeldCameras
     from drake_tracker.core.filter.estimate import TrackerEstimate
     from drake_tracker.core.sensors.camera import CameraIntrinsics
     from drake_tracker.io.bag_source import BagSource
@@ -135,12 +136,29 @@ def track_to_folder(events: Iterable[Event], model: TrackerModel,
     report = {"input": source or {}, "counts": counts.as_dict(),
               "wall_time_s": time.perf_counter() - start,
               "files": [s.path.name for s in sinks if s is not None]}
+    if tracker.calibration is not None:
+        report["camera_calibration"] = calibration_report(tracker.held, model)
     if sampler is not None:
         ok = np.all(np.isfinite(sampler.X_CE.reshape(len(sampler.X_CE), -1)), axis=1)
         report["methods"] = {"full_fusion": method_report(sampler.X_CE[ok], truth.X_CE[ok])}
     if out is not None:
         (out / "report.json").write_text(json.dumps(report, indent=2))
     return report
+
+
+def calibration_report(held: HeldCameras | None, model: TrackerModel) -> dict:
+    """What the cameras' calibration while tracking found (``core/calibration/online.py``):
+    the window, the log-likelihood before and after the fit, its cost, each camera's
+    offsets (``camera_offsets``: x, y, z in m, rx, ry, rz in rad) and the joints held at
+    their readings; ``{"calibrated": false}`` when no window came."""
+    if held is None:
+        return {"calibrated": False}
+    return {"calibrated": True, "window_s": list(held.window_s),
+            "log_likelihood": list(held.log_likelihood), "evaluations": held.evaluations,
+            "fit_wall_s": held.fit_wall_s,
+            "camera_offsets": {name: held.offsets[model.camera_joint_indices(name)].tolist()
+                               for name in model.camera_names},
+            "trusted_joints": [model.joint_names[j] for j in np.flatnonzero(held.trusted)]}
 
 
 def _estimates_bag(path: Path, model: TrackerModel, base_ns: int,
@@ -168,6 +186,16 @@ def print_report(report: dict) -> None:
         if c[name]:
             print(f"  {name.replace('_', ' ')}: " +
                   ", ".join(f"{v} {k}" for k, v in sorted(c[name].items())))
+    calibration = report.get("camera_calibration")
+    if calibration is not None and calibration["calibrated"]:
+        start, end = calibration["window_s"]
+        print(f"  the cameras calibrated themselves on their images of {start:.2f}-{end:.2f} s "
+              f"({calibration['fit_wall_s']:.1f} s) and are held there: camera_offsets " +
+              json.dumps({k: [round(v, 5) for v in o]
+                          for k, o in calibration["camera_offsets"].items()}))
+    elif calibration is not None:
+        print("  the cameras did not calibrate themselves: no window in which every "
+              "camera tracked and saw the arm (camera_calibration.window_s)")
     if "methods" in report:
         print(format_report_table(report))
 

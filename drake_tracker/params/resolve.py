@@ -94,6 +94,10 @@ def resolve_tracker_params(params: TrackerParams | ResolvedParams | None,
         estimate_camera_offset=bool(params.estimate_camera_offset),
         buffer_horizon_s=float(params.buffer_horizon_s),
         max_interpolation_gap_s=float(params.max_interpolation_gap_s),
+        camera_calibration=params.camera_calibration if (
+            params.camera_calibration.window_s > 0 and len(model.cameras) > 1
+            and params.estimate_camera_offset and not params.camera_offsets
+            and params.use_joint_readings) else None,
     )
 
 

@@ -19,6 +19,7 @@ Example YAML (every field optional)::
 
 from dataclasses import dataclass, field
 
+from drake_tracker.core.calibration.calibration_params import SelfCalibrationParams
 from drake_tracker.core.cpf.image_params import ImageParams
 from drake_tracker.core.robustness.health import HealthParams
 from drake_tracker.core.sensors.stamp_params import TimestampParams
@@ -119,6 +120,10 @@ class TrackerParams:
     #: estimate starts from the calibrated mount and every restart returns to it, and
     #: without ``estimate_camera_offset`` it stays there.
     camera_offsets: dict[str, list[float]] = field(default_factory=dict)
+    #: With several cameras whose offsets are estimated and not given: once every camera
+    #: has seen the arm for ``window_s``, fit their offsets to those images at once and
+    #: hold them (``core/calibration/online.py``), as ``calibrate-cameras`` would.
+    camera_calibration: SelfCalibrationParams = field(default_factory=SelfCalibrationParams)
     #: False: joint readings are ignored (the vision-only method); then the angles'
     #: prior comes from ``initial_positions_rad`` and the angle process noise.
     use_joint_readings: bool = True

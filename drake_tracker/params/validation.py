@@ -49,6 +49,7 @@ def validate_tracker_params(params: TrackerParams) -> None:
         validate_joint_noise(noise, f"kalman.overrides[{name}]")
     validate_image_params(params.image)
     params.health.validate()
+    params.camera_calibration.validate()
     for name, value in params.initial_positions_rad.items():
         _check(math.isfinite(value), f"initial_positions_rad[{name}]", value, "must be finite")
     for name, offsets in params.camera_offsets.items():

@@ -7,6 +7,7 @@ from __future__ import annotations
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 
+from drake_tracker.core.calibration.online import SelfCalibration
 from drake_tracker.core.cameras import best_health
 from drake_tracker.core.image_step import ImagePacing
 from drake_tracker.core.robustness.health import TrackerHealth
@@ -64,6 +65,9 @@ class CpfState(SharedAbstractState):
     images_skipped: int = 0
     #: The update running on the worker thread (``image.update_latency_s`` > 0).
     in_flight: ImageUpdateInFlight | None = None
+    #: The cameras' calibration (several cameras; ``core/calibration/online.py``):
+    #: ``calibration.held`` is what it holds once calibrated. None: not calibrating.
+    calibration: SelfCalibration | None = None
 
     @property
     def health(self) -> TrackerHealth:

@@ -10,13 +10,14 @@ from typing import TYPE_CHECKING
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
 
+from drake_tracker.core.calibration.online import SelfCalibration
 from drake_tracker.core.cameras import (
     another_camera_tracks,
     camera_named,
     clock_disagreement,
 )
 from drake_tracker.core.image_processor import ImageProcessor
-from drake_tracker.core.image_step import conclude_image
+from drake_tracker.core.image_step import calibrate_after, conclude_image
 from drake_tracker.core.robustness.health import TrackerHealth
 from drake_tracker.core.sensors.camera import CameraIntrinsics, as_intrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame
@@ -107,8 +108,11 @@ class CpfImageUpdateSystem(LeafSystem):
         #: The images skipped with a warning, counted by kind (a diagnostic over all its
         #: Contexts, as ``deadline_waits``).
         self.warnings = RateLimitedWarning(log)
+        self._model = model
+        calibrates = params.camera_calibration and list(prefixes) == model.camera_names
         self._state = self.DeclareAbstractState(AbstractValue.Make(CpfState(
-            cameras={name: CameraImageState(name) for name in prefixes})))
+            cameras={name: CameraImageState(name) for name in prefixes},
+            calibration=SelfCalibration() if calibrates else None)))
         self._frame_ports = {name: self.DeclareAbstractInputPort(
             f"{prefix}depth_frame", AbstractValue.Make(DepthFrame.empty()))
             for name, prefix in prefixes.items()}
@@ -258,7 +262,8 @@ class CpfImageUpdateSystem(LeafSystem):
                       lag_s=frame.arrival_time_s - t)
         s.cameras[name] = cam
         args = (frame, prior.anchor.prior, cam.pacing.jump_window_s(t, cam.health), cam.health,
-                another_camera_tracks({n: c.health for n, c in s.cameras.items()}, name))
+                another_camera_tracks({n: c.health for n, c in s.cameras.items()}, name),
+                None if s.calibration is None else s.calibration.held)
         observe = self.processors[name].observe
         if self._latency_s > 0:
             outcome = submit_image_update(observe, *args)
@@ -285,9 +290,12 @@ class CpfImageUpdateSystem(LeafSystem):
         cam = s.cameras[name]
         verdict = conclude_image(outcome, cam.health, self._params.health)
         s.cameras[name] = cam = replace(cam, health=verdict.health)
+        t = prior.image_time_s
+        s.calibration = calibrate_after(s.calibration, name, t, frame, prior.anchor.prior,
+                                        verdict.health, self.processors, self._model,
+                                        self._params)
         if verdict.observation is None:
             return self._skip(name, frame, verdict.problem, verdict.kind)
-        t = prior.image_time_s
         s.message = ImageObservationMessage(s.message.id + 1, frame.sequence, t,
                                             verdict.observation, prior.anchor)
         s.cameras[name] = replace(cam, pacing=cam.pacing.applied(t))

@@ -6,8 +6,9 @@ import pytest
 from fast_params import seeded_params
 from two_cameras import two_camera_config
 
+from drake_tracker.core.calibration.fold import equivalent_offsets
 from drake_tracker.core.filter.kalman import MEAN_A
-from drake_tracker.io.calibrate_run import calibrate_run, equivalent_offsets
+from drake_tracker.io.calibrate_run import calibrate_run
 from drake_tracker.io.replay import model_for_run, readings_at
 from drake_tracker.params.loading import load_tracker_params
 from drake_tracker.params.resolve import resolve_tracker_params
@@ -66,7 +67,7 @@ def test_a_head_bias_folds_into_the_camera_offsets_exactly_as_drake_places_the_c
 def test_the_joints_that_move_only_a_camera_are_the_heads(two_cameras, apollo):
     """Drake's kinematics: a head joint moves the head camera and not the hand; an arm
     joint moves the hand; nothing moves the post."""
-    from drake_tracker.io.calibrate_run import camera_only_joints
+    from drake_tracker.core.calibration.fold import camera_only_joints
 
     assert camera_only_joints(two_cameras) == ["head_pan", "head_tilt"]
     assert camera_only_joints(apollo) == ["head_pan", "head_tilt"]
@@ -258,8 +259,8 @@ def test_a_camera_on_the_arm_keeps_its_offsets_and_the_heads_takes_the_heads_err
     camera on the arm's last link keeps the fit's offsets (the arm's biases are the
     tracker's to follow), and the head camera, with the head at its readings, lands
     where the fit's head bias put it (Drake's kinematics)."""
+    from drake_tracker.core.calibration.fold import camera_only_joints, folded_offsets
     from drake_tracker.core.calibration.window_fit import WindowFit, WindowLayout
-    from drake_tracker.io.calibrate_run import _folded_offsets, camera_only_joints
     from drake_tracker.robot.model import CameraMount, FrameOffset, robot_preset
 
     config = robot_preset("apollo")
@@ -277,7 +278,7 @@ def test_a_camera_on_the_arm_keeps_its_offsets_and_the_heads_takes_the_heads_err
                            + [rng.normal(0.0, [0.01] * 3 + [0.02] * 3) for _ in range(2)])
     fit = WindowFit(layout, theta, theta, 0.0, 0.0, 1)
     reading = rng.normal(0.0, 0.3, len(robot))
-    folded = _folded_offsets(model, layout, fit, reading, camera_only_joints(model))
+    folded = folded_offsets(model, layout, fit, reading, camera_only_joints(model))
     np.testing.assert_allclose(folded["wrist"], layout.offsets(theta, "wrist"), atol=1e-9)
     q_fit = layout.configurations(theta, reading)[0]
     q = q_fit.copy()

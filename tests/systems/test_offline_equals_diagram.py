@@ -16,6 +16,7 @@ import pytest
 from fast_params import small_params
 from offline_vs_diagram import H, assert_same_when_settled, feed, simulate
 
+from drake_tracker.core.calibration.calibration_params import SelfCalibrationParams
 from drake_tracker.core.robustness import second_opinion
 from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.robot.model import build_tracker_model, robot_preset
@@ -207,7 +208,8 @@ CALIBRATED = {"camera": [0.02, -0.015, 0.018, 0.046, -0.026, 0.017],
               "post_camera": [-0.015, 0.02, -0.01, -0.026, 0.017, 0.035]}
 
 
-@pytest.mark.parametrize("latency_s, calibrated", [(0.0, False), (0.01, False), (0.0, True)])
+@pytest.mark.parametrize("latency_s, calibrated", [(0.0, ""), (0.01, ""), (0.0, "given"),
+                                                   (0.0, "online")])
 def test_two_cameras_give_the_same_estimates_offline_and_in_the_diagram(two_camera_run,
                                                                         latency_s, calibrated):
     """The same recorded two-camera data through the offline ``Tracker`` (images named
@@ -215,7 +217,9 @@ def test_two_cameras_give_the_same_estimates_offline_and_in_the_diagram(two_came
     same offset of each camera wherever no image is in flight, and the same images
     applied, each camera's through its own update. With the update on the worker
     thread, an update of one camera still in flight when the other camera's image comes
-    is applied first, as the offline tracker applies it."""
+    is applied first, as the offline tracker applies it. Calibrated: the offsets given
+    (``camera_offsets``) or fitted by the tracker itself on its first half second in
+    which both cameras see the arm (``camera_calibration``), held in both shells."""
     from offline_vs_diagram import feed_cameras, simulate_cameras
 
     from drake_tracker.io.replay import model_for_run
@@ -227,8 +231,11 @@ def test_two_cameras_give_the_same_estimates_offline_and_in_the_diagram(two_came
     times = run.reading_times_s + 0.6 * h
     p = small_params()
     p.image.seed, p.image.update_latency_s = 5, latency_s
-    if calibrated:
+    p.camera_calibration.window_s = 0.0
+    if calibrated == "given":
         p.camera_offsets, p.estimate_camera_offset = CALIBRATED, False
+    if calibrated == "online":  # a short window and fit: the same one in both shells
+        p.camera_calibration = SelfCalibrationParams(window_s=0.5, max_evaluations=480)
     tracker = Tracker(model, params=p, cameras={run.camera_name: run.camera_intrinsics} | {
         c.name: c.intrinsics for c in run.other_cameras})
     offline, applied = feed_cameras(tracker, run, times)
@@ -249,10 +256,20 @@ def test_two_cameras_give_the_same_estimates_offline_and_in_the_diagram(two_came
             [None if e is None else e.camera_offsets[name] for e in offline],
             first, margin, h, arrivals)
     final = offline[-1].camera_offsets
+    if calibrated == "online":
+        held = tracker.held
+        assert held is not None and cpf.calibration.held is not None
+        assert cpf.calibration.held.window_s == held.window_s
+        assert cpf.calibration.held.log_likelihood == held.log_likelihood
+        np.testing.assert_array_equal(cpf.calibration.held.offsets, held.offsets)
+        expected = {name: held.offsets[model.camera_joint_indices(name)]
+                    for name in model.camera_names}
+    else:
+        expected = CALIBRATED
     if calibrated:  # held where the calibration put them, in both shells
         for name in model.camera_names:
-            np.testing.assert_allclose(final[name], CALIBRATED[name], atol=1e-9)
-            np.testing.assert_allclose(offsets[-1][name], CALIBRATED[name], atol=1e-9)
+            np.testing.assert_allclose(final[name], expected[name], atol=1e-9)
+            np.testing.assert_allclose(offsets[-1][name], expected[name], atol=1e-9)
         return
     # Each camera's own offset moved from its prior (0): its images were scored
     # through it.

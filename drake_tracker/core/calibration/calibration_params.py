@@ -1,0 +1,29 @@
+"""The parameters of the cameras' calibration while the tracker runs (``online.py``)."""
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass
+class SelfCalibrationParams:
+    """With several cameras whose offsets are estimated (``estimate_camera_offset``)
+    and not given (``camera_offsets``), the tracker fits them once to a window of every
+    camera's images and holds them (``core/calibration/online.py``)."""
+
+    #: The window's length (s): the first this long, after every camera has said
+    #: ``tracking``, in which every image of every camera shows the arm. 0: the tracker
+    #: does not calibrate its cameras.
+    window_s: float = 2.0
+    #: The fit's evaluations of the window's log-likelihood (20 images): the time the
+    #: image that completes the window takes, about 1 ms each on a Zen 4 core.
+    max_evaluations: int = 8000
+
+    def validate(self) -> None:
+        """Raises ValueError naming the field."""
+        if not (math.isfinite(self.window_s) and self.window_s >= 0):
+            raise ValueError(f"camera_calibration.window_s = {self.window_s!r}: must be "
+                             "finite and >= 0 (0: no calibration while tracking)")
+        if not (isinstance(self.max_evaluations, int) and self.max_evaluations >= 24):
+            raise ValueError(f"camera_calibration.max_evaluations = "
+                             f"{self.max_evaluations!r}: must be an integer >= 24 (one "
+                             "generation of the search)")
