@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_tracker.core.calibration.online import MAX_HIDDEN_FRACTION
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.cpf.particle_filter import CPFResult
 from drake_tracker.core.filter.angle_observation import AngleObservation, Restart
@@ -240,15 +241,15 @@ class ImageProcessor:
                     f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
         if self.several_cameras and not restarted and (
                 predicted.visible_robot_pixels < self.params.health.min_robot_pixels
-                or (others_track and predicted.occluded > 0.5)):
+                or (others_track and predicted.occluded > MAX_HIDDEN_FRACTION)):
             remounted = None if held else self.search.remounted(prior, observed, predicted)
             if remounted is None:
                 return ImageOutcome(None, None, predicted, challenger=health.challenger,
                                     skip_reason=self._out_of_view_reason(predicted))
-            log.warning("image %d at %.3f s (camera '%s'): the image hides the arm where "
-                        "the estimate puts it, and shows it where the camera's nominal mount "
-                        "does; the camera's pose restarts", frame.sequence,
-                        predicted.time_s, self.camera_name)
+            log.warning("image %d at %.3f s (camera '%s'): the image hides the arm where the "
+                        "estimate puts it, and shows it where the camera's nominal mount does;"
+                        " the camera's pose restarts", frame.sequence, predicted.time_s,
+                        self.camera_name)
             restarted, misplaced, acquired, restart = True, False, False, self.remount
             prior, rendered, predicted = remounted
         plain = observation
@@ -392,8 +393,7 @@ class ImageProcessor:
         if predicted.see_through > self.params.health.max_see_through:
             return observation
         fraction = image_occlusion(predicted, image.likelihood, image.occlusion_prior_pixels)
-        return with_pixel_occlusion(observation,
-                                    pixel_occlusion(observation, rendered, fraction))
+        return with_pixel_occlusion(observation, pixel_occlusion(observation, rendered, fraction))
 
     def consistent(self, image: ImageConsistency) -> bool:
         """``is_consistent`` under the tracker's health parameters."""

@@ -28,7 +28,7 @@ from drake_tracker.core.calibration.fold import (
     camera_only_joints,
     fit_cameras,
 )
-from drake_tracker.core.calibration.online import WINDOW_S, found_window
+from drake_tracker.core.calibration.online import found_window, shows_the_arm
 from drake_tracker.core.calibration.window_fit import WindowFit, WindowImage, WindowLayout
 from drake_tracker.core.robustness.health import HealthState
 from drake_tracker.core.sensors.depth_frames import in_metres
@@ -39,6 +39,10 @@ if TYPE_CHECKING:
     from drake_tracker.io.recording import RecordedRun
     from drake_tracker.io.stream import Event
     from drake_tracker.robot.model import TrackerModel
+
+#: The window's length when it is found (s): two seconds of every camera seeing the arm
+#: (the tracker's own calibration waits for one, ``camera_calibration.window_s``).
+WINDOW_S = 2.0
 
 _ONE_CAMERA = ("calibrate-cameras needs several cameras: with one, the arm's biases and "
                "the camera's offsets explain its view together")
@@ -206,7 +210,7 @@ class _Window:
         while mine[0][0] < t - self.length_s - 1.0:
             mine.pop(0)
         health = tracker.channel(camera).health
-        shown = health.latest is not None and health.latest.visible_robot_pixels >= min_pixels
+        shown = shows_the_arm(health, min_pixels)
         self.seen.setdefault(camera, []).append((t, shown))
         if health.state == HealthState.TRACKING:
             self.tracking_since.setdefault(camera, t)
