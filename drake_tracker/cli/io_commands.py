@@ -204,7 +204,8 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--from", dest="start_s", type=float, default=None, metavar="SECONDS",
                    help="the window's start, in the recording's time (with --to; default: "
                         "the first --window-s seconds, after every camera has said "
-                        "'tracking', in which every camera's images all show the arm)")
+                        "'tracking', in which each camera has 3 images that show the "
+                        "arm)")
     p.add_argument("--to", dest="end_s", type=positive_seconds, default=None,
                    metavar="SECONDS", help="the window's end (with --from)")
     p.add_argument("--window-s", type=positive_seconds, default=2.0, metavar="SECONDS",

@@ -109,8 +109,9 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
     recorded run's, a bag's, a log's: ``io/stream.py``); ``cameras`` is each camera's
     intrinsics by name (see the module). The window is [start_s, end_s], or without them
     the first ``window_s`` seconds, after every camera has said ``tracking``, in which
-    every image of every camera (at least 3 of each) shows at least
-    ``health.min_robot_pixels`` of the arm unhidden where the tracker puts it.
+    at least 3 images of each camera show the arm where the tracker puts it (at least
+    ``health.min_robot_pixels`` unhidden, at most half hidden: ``shows_the_arm``); the
+    fit takes those images.
     ValueError for fewer than two cameras, no such window, a camera without an image in
     it or one that sees no arm there."""
     if len(cameras) < 2:
@@ -198,19 +199,20 @@ class _Window:
         """Without given bounds, after the tracker took ``frame`` (``track_stream``'s
         ``on_image``): the image kept while a window ending now could need it, and
         whether its camera's latest image showed the arm. Ends the replay
-        (``_WindowFoundError``) at the first time every camera's images all did for
-        ``length_s``, counted from when every camera had said ``tracking`` (the estimate
-        that starts the fit holds the arm)."""
+        (``_WindowFoundError``) at the first time 3 images of every camera did within
+        ``length_s`` (``found_window``), counted from when every camera had said
+        ``tracking`` (the estimate that starts the fit holds the arm)."""
         t = float(frame.capture_time_s)
         camera = self.cameras.pop((t, int(frame.sequence)), None)
         if camera is None:
             return
         mine = self.images.setdefault(camera, [])
-        mine.append((t, in_metres(frame.depth_m)))
-        while mine[0][0] < t - self.length_s - 1.0:
-            mine.pop(0)
         health = tracker.channel(camera).health
         shown = shows_the_arm(health, min_pixels)
+        if shown:
+            mine.append((t, in_metres(frame.depth_m)))
+        while mine and mine[0][0] < t - self.length_s - 1.0:
+            mine.pop(0)
         self.seen.setdefault(camera, []).append((t, shown))
         if health.state == HealthState.TRACKING:
             self.tracking_since.setdefault(camera, t)
@@ -265,7 +267,7 @@ def _replayed(window: _Window, events: Iterable[Event], model: TrackerModel,
         if not tracker.started:
             raise ValueError(f"no joint reading by {end_s} s: the tracker did not start")
         return tracker
-    raise ValueError(f"no {window.length_s:g} s in which every image of every camera shows "
+    raise ValueError(f"no {window.length_s:g} s in which 3 images of every camera show "
                      f"the arm (at least {min_pixels} pixels unhidden where the tracker "
                      f"puts it): give the window (--from, --to)")
 

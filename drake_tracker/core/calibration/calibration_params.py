@@ -11,7 +11,7 @@ class SelfCalibrationParams:
     camera's images and holds them (``core/calibration/online.py``)."""
 
     #: The window's length (s): the first this long, after every camera has said
-    #: ``tracking``, in which every image of every camera shows the arm. 0: the tracker
+    #: ``tracking``, in which each camera has 3 images that show the arm. 0: the tracker
     #: does not calibrate its cameras. Measured (two-camera presets, 2-core Zen 4 VM):
     #: 1 s and 2 s give the same accuracy at the presets' own length (whole-run p50
     #: 1.7-2.6 and 1.8-2.7 mm in the blind camera's frame), and in the quick suite's

@@ -11,7 +11,7 @@ held it stays (``docs/evaluation.md``, "Two cameras").
 
 What. :class:`SelfCalibration` watches every image the tracker takes. The first
 ``camera_calibration.window_s`` seconds (1 s) after every camera said ``tracking`` in which
-every image of every camera shows the arm (``health.min_robot_pixels`` unhidden) is the
+each camera has at least 3 images that show the arm (:func:`shows_the_arm`) is the
 window, as ``drake-tracker calibrate-cameras`` finds it; the image that completes it
 runs the fit (``fold.fit_cameras``: 10 images of each camera,
 ``camera_calibration.max_evaluations`` evaluations, a few seconds of that one image's
@@ -64,8 +64,12 @@ def found_window(seen: dict[str, list[tuple[float, bool]]], tracking_since: dict
                  cameras: list[str], t: float, length_s: float) -> float | None:
     """The start of the window ending at ``t``, or None: every camera of ``cameras`` has
     said ``tracking`` (``tracking_since``: when it first did) by ``t - length_s``, and
-    each camera's images since then (``seen``: (capture time, whether it showed the
-    arm)), at least 3, all showed the arm."""
+    at least 3 of each camera's images since then showed the arm (``seen``: (capture
+    time, whether it did)); the fit takes those, not the others. Measured: requiring
+    every image to show it, the quick suite's occlusion-lasting-2cam (10 s, the head
+    camera's view of the arm mostly behind the plate) found no window, 7.1 / 9.4 mm in
+    the head camera's frame over the whole run; with this rule 2.8 / 4.1 mm, the runs
+    at the presets' own length byte for byte the same."""
     if any(name not in tracking_since for name in cameras):
         return None
     start = t - length_s
@@ -73,7 +77,7 @@ def found_window(seen: dict[str, list[tuple[float, bool]]], tracking_since: dict
         return None
     for name in cameras:
         inside = [ok for s, ok in seen.get(name, []) if start <= s <= t]
-        if len(inside) < 3 or not all(inside):
+        if sum(inside) < 3:
             return None
     return start
 
