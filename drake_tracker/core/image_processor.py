@@ -200,9 +200,10 @@ class ImageProcessor:
     def _observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float,
                  health: TrackerHealth | None, others_track: bool, held) -> ImageOutcome:
         health = TrackerHealth(acquired=True) if health is None else health
-        restart, blocks = self.restart, None  # a forced restart: to the tracker's start
-        if held is not None:
-            prior, restart = held.prior(prior), held.restart(restart)
+        restart, blocks, search = self.restart, None, self.search  # restart: to the start
+        if held is not None:  # the cameras calibrated: their joints stay where they are
+            prior, restart, search = held.prior(prior), held.restart(restart), \
+                self.search.held_by(held)
             blocks = held.blocks(self.update.blocks)
         acquired = health.acquired
         start = time.perf_counter()
@@ -285,17 +286,16 @@ class ImageProcessor:
         self.times.update_s += time.perf_counter() - start
         if result is None:
             return ImageOutcome(None, None, None)
-        # (A restart above has cleared ``acquired``.) A second opinion from the encoders'
-        # arm on an image that contradicts the held arm.
-        # Else H2 alone, after the filter's innovations outgrew its model.
+        # (A restart above cleared ``acquired``.) A second opinion on an image that contradicts
+        # the held arm; else H2 alone, after the innovations outgrew the filter's model.
         asked = self.params.use_joint_readings and not restarted and acquired
         surprising = is_surprising(predicted, self.params.health, health)
         if asked and surprising:
-            overrule = self.search.second_opinion(plain, prior, result, predicted.time_s,
-                                                  rng, frame.sequence)
+            overrule = search.second_opinion(plain, prior, result, predicted.time_s, rng,
+                                             frame.sequence)
         elif asked and drifts(predicted, health, self.params.health):
-            overrule = self.search.kept_search(plain, observation, prior, result,
-                                               predicted.time_s, rng, frame.sequence)
+            overrule = search.kept_search(plain, observation, prior, result,
+                                          predicted.time_s, rng, frame.sequence)
         else:
             overrule = None
         # With several cameras, H4: this camera's own pose searched again, the arm the
@@ -310,8 +310,8 @@ class ImageProcessor:
         # the encoders' arm over several images (see core/robustness/second_opinion.py).
         challenger = None
         if self.params.use_joint_readings and not restarted and overrule is None:
-            overrule, challenger = self.search.challenge(plain, prior, result, health,
-                                                         predicted.time_s, rng, frame.sequence)
+            overrule, challenger = search.challenge(plain, prior, result, health,
+                                                    predicted.time_s, rng, frame.sequence)
         if overrule is not None:
             restarted, misplaced = True, False
             prior, result, restart = overrule.prior, overrule.result, overrule.restart

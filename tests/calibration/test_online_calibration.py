@@ -192,3 +192,35 @@ def test_a_camera_without_images_switches_it_off(recorded):
     tracker = Tracker(model, params=params,
                       cameras={run.camera_name: run.camera_intrinsics})
     assert tracker.calibration is None
+
+
+def test_the_searches_leave_the_held_joints_alone():
+    """Held, the second opinion's, the kept search's and the challenger's searches cover
+    every block but the held joints, and their restarts return the offsets to the
+    calibration; the tracker's own searches are as they were."""
+    from two_cameras import CAMERA, two_camera_config
+
+    from drake_tracker.robot.model import build_tracker_model
+
+    model = build_tracker_model(two_camera_config())
+    tracker = Tracker(model, params=seeded_params(0), cameras={"camera": CAMERA,
+                                                               "post": CAMERA})
+    processor = tracker.channel("camera").images
+    n = model.num_joints
+    offsets = np.full(n, np.nan)
+    offsets[model.camera_joint_indices("camera")] = 0.01
+    offsets[model.camera_joint_indices("post")] = -0.01
+    trusted = np.isin(model.joint_names, ["head_pan", "head_tilt"])
+    held = HeldCameras(offsets, trusted, (0.0, 1.0), (0.0, 1.0))
+    search = processor.search.held_by(held)
+    covered = set(np.concatenate(search._blocks).tolist())
+    before = set(np.concatenate(processor.update.blocks).tolist())
+    assert covered == {j for j in before if not held.held[j]} and covered < before
+    assert not any(held.held[b].any() for b in search._drift_blocks)
+    prior = _belief(np.random.default_rng(6), n)
+    mine = model.camera_joint_indices("camera")
+    np.testing.assert_allclose(search.restart.apply(prior)[MEAN_A][mine], 0.01)
+    # The tracker's own search is untouched: its restart still goes to a + b.
+    assert processor.search._blocks is None
+    np.testing.assert_allclose(processor.search.restart.apply(prior)[MEAN_A][mine],
+                               prior[MEAN_A][mine] + prior[MEAN_B][mine])

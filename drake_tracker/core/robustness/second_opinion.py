@@ -31,6 +31,7 @@ wrong fold's +3,200 for 20 images and won only 8.6 s later (1 m off until then).
 
 from __future__ import annotations
 
+import copy
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -54,6 +55,7 @@ from drake_tracker.core.robustness.health import (
 from drake_tracker.core.robustness.innovation import FALSE_ALARM_PROBABILITY
 
 if TYPE_CHECKING:
+    from drake_tracker.core.calibration.online import HeldCameras
     from drake_tracker.core.cpf.image_update import CpfImageUpdate
     from drake_tracker.core.likelihood.pixel_model import PreparedObservation
     from drake_tracker.core.resolved_params import ResolvedParams
@@ -163,6 +165,18 @@ class EncoderSearch:
             stepped[restart.untouched] = False
         self._drift_step = replace(restart.kept(), untouched=np.flatnonzero(~stepped))
         self._drift_blocks = self._blocks_holding(stepped)
+        #: The blocks a search covers when none are given (None: every block).
+        self._blocks: list[np.ndarray] | None = None
+
+    def held_by(self, held: HeldCameras) -> EncoderSearch:
+        """These searches with the cameras held (``core/calibration/online.py``): their
+        restarts return the offsets to the calibration, and no search samples a held
+        joint."""
+        search = copy.copy(self)
+        search.restart = held.restart(self.restart)
+        search._blocks = held.blocks(self.update.blocks)
+        search._drift_blocks = held.blocks(self._drift_blocks)
+        return search
 
     def _blocks_holding(self, joints: np.ndarray) -> list[np.ndarray]:
         """The update's CPF blocks that hold any of ``joints`` (n,) bool."""
@@ -207,7 +221,8 @@ class EncoderSearch:
                                      self.params.image.likelihood)
             answer = self.update(start, self._occlusion_aware(plain, rendered, seen), rng,
                                  None, None, self.params.image.acquisition_num_particles,
-                                 coarse_sweeps=False, blocks=blocks)
+                                 coarse_sweeps=False,
+                                 blocks=self._blocks if blocks is None else blocks)
             if answer is not None and not answer.flat_likelihood:
                 found.append((answer, start, restart))
         if len(found) < 2:
