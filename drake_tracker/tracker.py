@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.core.calibration.online import SelfCalibration
+from drake_tracker.core.calibration.online import SelfCalibration, self_calibration
 from drake_tracker.core.cameras import (
     CameraChannel,
     another_camera_tracks,
@@ -104,10 +104,8 @@ class Tracker:
         stamps = self.params.timestamps
         self.readings = ReadingGate(stamps, model.robot_joint_names, log)
         #: Several cameras calibrate themselves once (``core/calibration/online.py``).
-        self.calibration: SelfCalibration | None = None
-        if self.params.camera_calibration and list(self.channels) == model.camera_names \
-                and all(c.images for c in self.channels.values()):
-            self.calibration = SelfCalibration()
+        self.calibration: SelfCalibration | None = self_calibration(
+            self.params, model, [n for n, c in self.channels.items() if c.images])
         self.warnings = RateLimitedWarning(log)
         if not self.params.use_joint_readings:
             self.buffer = new_belief_buffer(self.params, 0.0, None)

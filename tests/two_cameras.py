@@ -1,7 +1,7 @@
 """Apollo with a second depth camera on a post, and the camera model of both (shared by
 the tests of several cameras: ``systems/``, ``robustness/test_camera_remount.py``,
-``io/test_estimates_bag.py``), and a recorded two-camera run in a folder (``io/``'s bag
-and LCM tests)."""
+``io/test_estimates_bag.py``), a recorded two-camera run in a folder (``io/``'s bag
+and LCM tests), and the calibration tests' recording (``calibration/``)."""
 
 import numpy as np
 
@@ -36,3 +36,15 @@ def recorded_two_cameras(folder, ticks_per_second: int):
     (folder / "robot.yaml").write_text(run.robot_config_yaml)
     (folder / "params.yaml").write_text(tracker_params_to_yaml(small_params()))
     return run
+
+
+def in_out_in_recording(duration_s: float):
+    """``duration_s`` of in-out-in-2cam/none, world seed 7: both cameras see the arm,
+    each mounted off its nominal pose (the preset's 31 mm / 3.2 deg and 27 mm / 2.7 deg;
+    the calibration tests)."""
+    from drake_tracker.sim.record import simulate_and_record
+    from drake_tracker.sim.scenario.load import load_scenario
+
+    scenario = load_scenario("in-out-in-2cam/none")
+    scenario.seed = 7
+    return simulate_and_record(scenario, duration_s=duration_s)

@@ -115,22 +115,7 @@ def add_track(sub: argparse._SubParsersAction) -> None:
     source.add_argument("--bag", metavar="PATH",
                         help="ROS 1 .bag, ROS 2 bag folder (sqlite3 or MCAP) or .mcap file")
     source.add_argument("--lcm-log", metavar="FILE", help="lcm-logger file")
-    p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
-                   help="with --bag or --lcm-log: the robot (a RobotConfig YAML, as "
-                        "drake_tracker.robot.model.load_robot_config reads it, or a "
-                        "shipped preset: apollo, arm6)")
-    p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic "
-                   "(default: the only one)")
-    p.add_argument("--depth-topic", default=None, action="append",
-                   metavar="[NAME=]TOPIC",
-                   help="with --bag: the depth Image topic (default: the only one); "
-                        "repeated as NAME=TOPIC, several depth cameras, each the model's "
-                        "camera NAME (RobotConfig.cameras)")
-    p.add_argument("--camera-info-topic", default=None, action="append",
-                   metavar="[NAME=]TOPIC",
-                   help="with --bag: the CameraInfo topic (default: the only one); as "
-                        "NAME=TOPIC, camera NAME's (default: the only one beside its depth "
-                        "topic)")
+    add_bag_track_arguments(p)
     add_lcm_track_arguments(p)
     p.add_argument("--params", default=None, metavar="YAML", help=PARAMS_HELP)
     p.add_argument("--out", default=None, help="folder for estimates.csv, estimates.mcap "
@@ -169,8 +154,9 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
                                   "several cameras",
         description="Fits every camera's six offsets (its mounting error) to the images of "
                     "all cameras in a window where they see the arm, together (the window "
-                    "given, or found: the first two seconds in which every camera's images "
-                    "all show the arm): the tracker replays the recording to the window's "
+                    "given, or found: the first two seconds in which each camera has 3 "
+                    "images that show the arm): the tracker replays the recording to the "
+                    "window's "
                     "end and its estimate starts the fit "
                     "(drake_tracker/io/calibrate_run.py). Writes the tracker parameters "
                     "'camera_offsets', held ('estimate_camera_offset: false'), for "
@@ -189,15 +175,7 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
                         "camera (--depth-topic NAME=TOPIC, --robot; as 'track --bag')")
     source.add_argument("--lcm-log", metavar="FILE", help="lcm-logger file with a channel "
                         "per camera (--camera NAME=WxH:..., --robot; as 'track --lcm-log')")
-    p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
-                   help="with --bag or --lcm-log: the robot, its cameras named as the "
-                        "topics' or cameras' NAMEs")
-    p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic")
-    p.add_argument("--depth-topic", default=None, action="append", metavar="NAME=TOPIC",
-                   help="with --bag: camera NAME's depth topic, once per camera")
-    p.add_argument("--camera-info-topic", default=None, action="append",
-                   metavar="NAME=TOPIC", help="with --bag: camera NAME's CameraInfo topic "
-                   "(default: the one beside its depth topic)")
+    add_bag_track_arguments(p)
     add_lcm_track_arguments(p)
     p.add_argument("--out", required=True, metavar="FILE.yaml",
                    help="the tracker parameters to write (camera_offsets)")
@@ -250,6 +228,27 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
         return 0
 
     p.set_defaults(func=run)
+
+
+def add_bag_track_arguments(p: argparse.ArgumentParser) -> None:
+    """``--robot`` and the topic flags of ``--bag`` (``track``, ``calibrate-cameras``:
+    read by ``_open_bag``)."""
+    p.add_argument("--robot", default=None, metavar="ROBOT.yaml",
+                   help="with --bag or --lcm-log: the robot (a RobotConfig YAML, as "
+                        "drake_tracker.robot.model.load_robot_config reads it, or a "
+                        "shipped preset: apollo, arm6)")
+    p.add_argument("--joint-topic", default=None, help="with --bag: the JointState topic "
+                   "(default: the only one)")
+    p.add_argument("--depth-topic", default=None, action="append",
+                   metavar="[NAME=]TOPIC",
+                   help="with --bag: the depth Image topic (default: the only one); "
+                        "repeated as NAME=TOPIC, several depth cameras, each the model's "
+                        "camera NAME (RobotConfig.cameras)")
+    p.add_argument("--camera-info-topic", default=None, action="append",
+                   metavar="[NAME=]TOPIC",
+                   help="with --bag: the CameraInfo topic (default: the only one); as "
+                        "NAME=TOPIC, camera NAME's (default: the only one beside its depth "
+                        "topic)")
 
 
 def _calibrate_source(model: TrackerModel, source, params, window: dict):

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import Context, EventStatus, InputPort, LeafSystem, OutputPort
 
-from drake_tracker.core.calibration.online import SelfCalibration
+from drake_tracker.core.calibration.online import self_calibration
 from drake_tracker.core.cameras import (
     another_camera_tracks,
     camera_named,
@@ -109,10 +109,9 @@ class CpfImageUpdateSystem(LeafSystem):
         #: Contexts, as ``deadline_waits``).
         self.warnings = RateLimitedWarning(log)
         self._model = model
-        calibrates = params.camera_calibration and list(prefixes) == model.camera_names
         self._state = self.DeclareAbstractState(AbstractValue.Make(CpfState(
             cameras={name: CameraImageState(name) for name in prefixes},
-            calibration=SelfCalibration() if calibrates else None)))
+            calibration=self_calibration(params, model, list(prefixes)))))
         self._frame_ports = {name: self.DeclareAbstractInputPort(
             f"{prefix}depth_frame", AbstractValue.Make(DepthFrame.empty()))
             for name, prefix in prefixes.items()}

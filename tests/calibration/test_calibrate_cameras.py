@@ -4,7 +4,7 @@ simulated two-camera run, and the tracker parameters it writes (``camera_offsets
 import numpy as np
 import pytest
 from fast_params import seeded_params
-from two_cameras import two_camera_config
+from two_cameras import in_out_in_recording, two_camera_config
 
 from drake_tracker.core.calibration.fold import equivalent_offsets
 from drake_tracker.core.filter.kalman import MEAN_A
@@ -24,14 +24,8 @@ def two_cameras():
 
 @pytest.fixture(scope="module")
 def recorded():
-    """1.5 s of in-out-in-2cam/none: both cameras see the arm, each mounted off its
-    nominal pose (the preset's 31 mm / 3.2 deg and 27 mm / 2.7 deg)."""
-    from drake_tracker.sim.record import simulate_and_record
-    from drake_tracker.sim.scenario.load import load_scenario
-
-    scenario = load_scenario("in-out-in-2cam/none")
-    scenario.seed = 7
-    return simulate_and_record(scenario, duration_s=1.5)
+    """1.5 s of in-out-in-2cam/none (``two_cameras.in_out_in_recording``)."""
+    return in_out_in_recording(1.5)
 
 
 def camera_world_pose(model, name, q):

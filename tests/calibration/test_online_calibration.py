@@ -5,6 +5,7 @@ simulated two-camera run, each mount against the truth."""
 import numpy as np
 import pytest
 from fast_params import seeded_params
+from two_cameras import in_out_in_recording
 
 from drake_tracker.core.calibration.calibration_params import SelfCalibrationParams
 from drake_tracker.core.calibration.online import PIN_STD, HeldCameras, found_window
@@ -111,14 +112,8 @@ def test_the_parameters_are_checked_and_switch_it_off():
 
 @pytest.fixture(scope="module")
 def recorded():
-    """2 s of in-out-in-2cam/none: both cameras see the arm, each mounted off its
-    nominal pose (the preset's 31 mm / 3.2 deg and 27 mm / 2.7 deg)."""
-    from drake_tracker.sim.record import simulate_and_record
-    from drake_tracker.sim.scenario.load import load_scenario
-
-    scenario = load_scenario("in-out-in-2cam/none")
-    scenario.seed = 7
-    return simulate_and_record(scenario, duration_s=2.0)
+    """2 s of in-out-in-2cam/none (``two_cameras.in_out_in_recording``)."""
+    return in_out_in_recording(2.0)
 
 
 def _tracked(run, params):

@@ -218,6 +218,17 @@ class SelfCalibration:
         return SelfCalibration(held=held)
 
 
+def self_calibration(params: ResolvedParams, model: TrackerModel,
+                     cameras: list[str]) -> SelfCalibration | None:
+    """The calibration's first state for a tracker whose image updates take ``cameras``
+    (the model's camera names, in its order), or None when it does not calibrate: the
+    parameters say no (``ResolvedParams.camera_calibration``), or a camera of the model
+    has no image update (the fit needs every camera's images)."""
+    if params.camera_calibration is None or list(cameras) != model.camera_names:
+        return None
+    return SelfCalibration()
+
+
 def shows_the_arm(health: TrackerHealth, min_pixels: int) -> bool:
     """Whether the image behind ``health.latest`` shows the arm for the window: at least
     ``min_pixels`` of it unhidden, at most ``MAX_HIDDEN_FRACTION`` hidden."""
