@@ -22,6 +22,9 @@ from drake_tracker.evaluation.summary import read_errors_csv
 from drake_tracker.evaluation.tasks import Task, environment
 
 _ERRORS_SUFFIXES = (".csv.gz", ".csv")  # written, then read as well (older folders)
+#: A payload's other tables, each in ``results/<kind>/<task>.csv.gz``: each camera's
+#: frame against the truth, and the health just after each image.
+_SIDE_FILES = ("cameras", "images")
 
 
 def _write_atomic(path: Path, data: str | bytes) -> None:
@@ -69,13 +72,15 @@ class ResultStore:
     def write(self, payload: dict) -> None:
         """Writes a task's payload (from :func:`~.tasks.compute_task`), its errors CSV
         last; each camera's frame against the truth (``cameras_csv``, if any) goes to
-        ``results/cameras/<name>.csv.gz``."""
+        ``results/cameras/<name>.csv.gz``, the health after each image (``images_csv``)
+        to ``results/images/<name>.csv.gz``."""
         name = payload["name"]
-        meta = {k: v for k, v in payload.items() if k not in ("csv", "cameras_csv")}
+        meta = {k: v for k, v in payload.items() if not k.endswith("csv")}
         _write_atomic(self.results_dir / f"{name}.json", json.dumps(meta, indent=1))
-        if payload.get("cameras_csv"):
-            _write_atomic(self._cameras_path(name), gzip.compress(
-                payload["cameras_csv"].encode(), compresslevel=9, mtime=0))
+        for kind in _SIDE_FILES:
+            if payload.get(f"{kind}_csv"):
+                _write_atomic(self._side_path(kind, name), gzip.compress(
+                    payload[f"{kind}_csv"].encode(), compresslevel=9, mtime=0))
         _write_atomic(self.result_path(name),
                       gzip.compress(payload["csv"].encode(), compresslevel=9, mtime=0))
 
@@ -90,18 +95,27 @@ class ResultStore:
             rows.extend(self.read_errors(name))
         return rows
 
-    def _cameras_path(self, name: str) -> Path:
-        return self.results_dir / "cameras" / f"{name}{_ERRORS_SUFFIXES[0]}"
+    def _side_path(self, kind: str, name: str) -> Path:
+        return self.results_dir / kind / f"{name}{_ERRORS_SUFFIXES[0]}"
+
+    def _load_side_rows(self, kind: str, tasks: list[Task]) -> list[dict]:
+        rows = []
+        for task in sorted(tasks, key=lambda t: t.name):
+            path = self._side_path(kind, task.name)
+            if path.exists() and self.is_done(task):
+                rows.extend(read_errors_csv(path))
+        return rows
 
     def load_camera_rows(self, tasks: list[Task]) -> list[dict]:
         """The stored per-camera samples (``camera_frames.CAMERA_COLUMNS``) of the done
         ``tasks`` that have them (results stored before they were written have none)."""
-        rows = []
-        for task in sorted(tasks, key=lambda t: t.name):
-            path = self._cameras_path(task.name)
-            if path.exists() and self.is_done(task):
-                rows.extend(read_errors_csv(path))
-        return rows
+        return self._load_side_rows("cameras", tasks)
+
+    def load_image_rows(self, tasks: list[Task]) -> list[dict]:
+        """The stored per-image health rows (``health_calibration.IMAGE_COLUMNS``) of the
+        done ``tasks`` that have them (results stored before they were written have
+        none)."""
+        return self._load_side_rows("images", tasks)
 
     def load_metas(self, tasks: list[Task]) -> list[dict]:
         """The stored environments and wall times of ``tasks`` (older results have none)."""

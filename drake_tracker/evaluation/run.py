@@ -29,7 +29,13 @@ from drake_tracker.evaluation.results import (
     record_environments,
 )
 from drake_tracker.evaluation.summary import summarize, write_summary
-from drake_tracker.evaluation.tasks import SETTLE_S, Task, TaskRunner, make_tasks
+from drake_tracker.evaluation.tasks import (
+    SAMPLE_PERIOD_S,
+    SETTLE_S,
+    Task,
+    TaskRunner,
+    make_tasks,
+)
 
 if TYPE_CHECKING:
     import argparse
@@ -117,10 +123,7 @@ def evaluate(tasks: list[Task], out_dir: Path, executor: Executor | None = None,
     text = write_summary(summary, out_dir, failures)
     (out_dir / "paper_comparison.md").write_text(
         format_paper_comparison(paper_comparison(summary)) + "\n")
-    health = format_health_confusion(health_confusion(rows, settle_s))
-    (out_dir / "health_confusion.md").write_text(
-        f"# The health state against the hand's error, from {settle_s:g} s on\n\n"
-        + health + "\n")
+    health = _write_health(rows, store.load_image_rows(tasks), out_dir, settle_s)
     _write_camera_frames(store.load_camera_rows(tasks), out_dir, settle_s)
     if rows:
         first_seed = {}
@@ -146,6 +149,23 @@ def _write_rows(path: Path, rows: list[dict]) -> None:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
+
+
+def _write_health(rows: list[dict], image_rows: list[dict], out_dir: Path,
+                  settle_s: float) -> str:
+    """``health_confusion.md``: the health state against the hand's error at the error
+    samples and, when the tasks stored them, just after each image (``image_health.csv``);
+    returns its text."""
+    text = (f"## At the error samples (every {SAMPLE_PERIOD_S:g} s)\n\n"
+            + format_health_confusion(health_confusion(rows, settle_s)))
+    if image_rows:
+        _write_rows(out_dir / "image_health.csv", image_rows)
+        text += ("\n## Just after each image (the state it left, the hand then)\n\n"
+                 + format_health_confusion(health_confusion(image_rows, settle_s), "images"))
+    (out_dir / "health_confusion.md").write_text(
+        f"# The health state against the hand's error, from {settle_s:g} s on\n\n"
+        + text + "\n")
+    return text
 
 
 def _write_camera_frames(rows: list[dict], out_dir: Path, settle_s: float) -> None:

@@ -30,6 +30,11 @@ from drake_tracker.evaluation.camera_frames import (
     camera_poses,
     true_positions,
 )
+from drake_tracker.evaluation.health_calibration import (
+    ImageStates,
+    image_errors,
+    image_health_csv_text,
+)
 from drake_tracker.evaluation.methods import method_params
 from drake_tracker.metrics import pose_errors
 
@@ -192,7 +197,8 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
     ``tracker_seed`` is added to the parameters' ``image.seed``. Returns
     {method: {"times_s", "translation_mm", "rotation_deg", "health"}}, and for a replayed
     method "cameras", each camera's frame against the truth
-    (``camera_frames.camera_frame_errors``); each method's wall time
+    (``camera_frames.camera_frame_errors``), and "images", the state and error just after
+    each image (``health_calibration.image_errors``); each method's wall time
     goes into ``wall_s`` if given (and, before this process's first replay, the
     kernels' loading into ``wall_s["kernel_warm_up"]``), and each tracking method's
     image times (``ReplayResult.decision_times``) into ``decision_times``.
@@ -217,7 +223,7 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
         if report:
             report(f"{method} ({k}/{len(methods)})")
         start = time.perf_counter()
-        health, cameras = np.full(len(times), -1, int), None
+        health, cameras, image_rows = np.full(len(times), -1, int), None, None
         if method == "encoders_only":
             X = encoders_only_X_CE(run, model)[truth_index]
         else:
@@ -229,8 +235,10 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
             if warm_up_s is not None and wall_s is not None:
                 wall_s["kernel_warm_up"] = warm_up_s
             start = time.perf_counter()
-            replay = replay_run(run, params, model, sample_times_s=times)
+            states = ImageStates()
+            replay = replay_run(run, params, model, sample_times_s=times, on_image=states)
             X, health = replay.X_CE, replay.health
+            image_rows = image_errors(run, states)
             if truth_q is not None:
                 cameras = camera_frame_errors(model, replay.positions, truth_q, truth_poses)
             if decision_times is not None:
@@ -245,6 +253,8 @@ def evaluate_run(run: RecordedRun, methods: Iterable[str], min_image_interval_s:
                        "health": health}
         if cameras is not None:
             out[method]["cameras"] = cameras
+        if image_rows is not None:
+            out[method]["images"] = image_rows
     return out
 
 
@@ -345,7 +355,8 @@ def _load_or_simulate(task: Task, cache_dir: Path | None, report: Reporter):
 
 def compute_task(task: Task, cache_dir: Path | None = None,
                  report: Reporter | None = None) -> dict:
-    """Runs one task and returns its payload: ``{"name", "csv", "cameras_csv", "environment",
+    """Runs one task and returns its payload: ``{"name", "csv", "cameras_csv", "images_csv"
+    (the health just after each image), "environment",
     "simulated_s", "wall_s": {"simulate", <method>...}, "decision_times": {<method>:
     {"images", "update_s", "decision_s"}}}``.
 
@@ -364,6 +375,7 @@ def compute_task(task: Task, cache_dir: Path | None = None,
     return {"name": task.name, "csv": errors_csv_text(task, errors),
             "cameras_csv": camera_errors_csv_text(task.sequence, task.bias, task.seed, times,
                                                   cameras) if cameras else "",
+            "images_csv": image_health_csv_text(task.sequence, task.bias, task.seed, errors),
             "environment": environment(), "simulated_s": float(run.duration_s),
             "wall_s": wall_s, "decision_times": decision_times}
 

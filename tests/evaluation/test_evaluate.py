@@ -2,6 +2,7 @@
 resuming."""
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -82,7 +83,7 @@ def test_the_task_seed_reaches_the_tracker(monkeypatch):
 
     seen = []
 
-    def fake_replay(run, params, model, sample_times_s):
+    def fake_replay(run, params, model, sample_times_s, on_image=None):
         seen.append(params.image.seed)
         raise RuntimeError("stop here")
 
@@ -111,7 +112,7 @@ def test_a_process_loads_the_kernels_before_its_first_replay_only(monkeypatch):
     monkeypatch.setattr(warm_up, "warm_up_tracker_kernels",
                         lambda model, camera, params: calls.append((model, camera)) or 7.0)
 
-    def fake_replay(run, params, model, sample_times_s):
+    def fake_replay(run, params, model, sample_times_s, on_image=None):
         order.append(len(calls))
         raise RuntimeError("stop here")
 
@@ -264,6 +265,15 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
     assert {r["health"] for r in rows if r["method"] == "encoders_only"} == {""}
     states = {r["health"] for r in rows if r["method"] == "full_fusion"}
     assert states <= {"", "tracking", "uncertain", "lost"} and "tracking" in states
+    # The state just after each image, in its own table: the tracker's methods only.
+    with (tmp_path / "image_health.csv").open() as f:
+        images = list(csv.DictReader(f))
+    assert {r["method"] for r in images} == {"full_fusion"} and len(images) > 5
+    meta = json.loads((tmp_path / f"results/{task.name}.json").read_text())
+    assert len(images) == meta["decision_times"]["full_fusion"]["images"]  # paced: 0.1 s
+    assert len(images) < 1.5 / 0.1 + 2
+    assert {r["health"] for r in images} <= {"tracking", "uncertain", "lost"}
+    assert "Just after each image" in (tmp_path / "health_confusion.md").read_text()
     # Each camera's frame against the truth: for the only camera, the hand in its frame
     # is errors.csv's output, sample by sample (the world is the model here); the
     # encoders alone estimate no camera.
@@ -291,7 +301,6 @@ def test_a_tiny_evaluation_writes_its_files_and_percentiles(tmp_path):
                if (r["method"], r["metric"]) == ("encoders_only", "translation_mm"))
     assert float(enc["p50"]) > 50.0
     # protocol.json records what the results depend on, as the worker saw it.
-    import json
 
     protocol = json.loads((tmp_path / "protocol.json").read_text())
     (env,) = protocol["task_environments"]

@@ -8,12 +8,16 @@ import pytest
 
 from drake_tracker.core.robustness.health import HealthState
 from drake_tracker.evaluation.health_calibration import (
+    ImageStates,
     band,
     format_health_confusion,
     health_confusion,
+    image_errors,
+    image_health_csv_text,
 )
 from drake_tracker.io.replay import replay_run
 from drake_tracker.io.synthetic import synthetic_run
+from drake_tracker.metrics import pose_errors
 
 
 def _row(state, error, time_s=6.0, method="full_fusion"):
@@ -64,3 +68,42 @@ def test_a_replay_reports_the_trackers_health_at_each_sample(apollo):
         if arrival in seen:
             assert result.health[k] == seen[arrival]
     assert int(HealthState.TRACKING) in set(result.health.tolist())
+
+
+def test_the_state_after_each_image_is_the_replays_sample_just_after_it(apollo):
+    """``ImageStates`` against the replay's own sampler: a sample 1 us after each image's
+    arrival holds the estimate and state the image left (readings stamped at or before
+    an arrival come first), and the per-image error is the hand against the truth there."""
+    run = synthetic_run(apollo, duration_s=1.5, encoder_rate_hz=200.0, seed=2)
+    states, arrivals = ImageStates(), []
+
+    def on_image(tracker, frame):
+        before = len(states.times_s)
+        states(tracker, frame)
+        if len(states.times_s) > before:
+            arrivals.append(frame.arrival_time_s)
+
+    after = run.image_arrival_times_s + 1e-6
+    sampled = replay_run(run, None, apollo, sample_times_s=after, on_image=on_image)
+    rows = image_errors(run, states)
+    k = np.searchsorted(after, np.asarray(arrivals) + 1e-6 - 1e-9)
+    assert len(rows["times_s"]) == len(arrivals) > 5
+    assert len(arrivals) == sampled.num_images_applied  # every image here is applied
+    # A reading stamped a rounding error after an arrival (0.35000000000000003 against
+    # 0.35) comes after the image, and the sample 1 us later holds it as well.
+    alone = np.array([not np.any((run.reading_times_s > t) & (run.reading_times_s < a + 1e-6))
+                      for t, a in zip(rows["times_s"], arrivals, strict=True)])
+    assert alone.sum() >= len(arrivals) - 2
+    np.testing.assert_allclose(np.stack(states.X_CE)[alone], sampled.X_CE[k[alone]])
+    np.testing.assert_array_equal(rows["health"][alone], sampled.health[k[alone]])
+    truth = np.clip(np.searchsorted(run.truth_times_s, rows["times_s"]), 0,
+                    len(run.truth_times_s) - 1)
+    np.testing.assert_allclose(rows["translation_mm"][alone], pose_errors(
+        sampled.X_CE[k[alone]], run.truth_X_CE[truth[alone]])[0])
+    assert np.all(rows["times_s"] <= np.asarray(arrivals) + 1e-12)  # its latest reading
+    text = image_health_csv_text("s", "none", 3, {"full_fusion": {"images": rows},
+                                                  "encoders_only": {}})
+    lines = text.splitlines()
+    assert lines[0] == "sequence,bias,method,seed,time_s,translation_mm,health"
+    assert len(lines) == len(arrivals) + 1 and all(",full_fusion,3," in x for x in lines[1:])
+    assert image_health_csv_text("s", "none", 3, {"encoders_only": {}}) == ""
