@@ -96,10 +96,20 @@ def test_the_state_after_each_image_is_the_replays_sample_just_after_it(apollo):
     assert alone.sum() >= len(arrivals) - 2
     np.testing.assert_allclose(np.stack(states.X_CE)[alone], sampled.X_CE[k[alone]])
     np.testing.assert_array_equal(rows["health"][alone], sampled.health[k[alone]])
-    truth = np.clip(np.searchsorted(run.truth_times_s, rows["times_s"]), 0,
-                    len(run.truth_times_s) - 1)
-    np.testing.assert_allclose(rows["translation_mm"][alone], pose_errors(
-        sampled.X_CE[k[alone]], run.truth_X_CE[truth[alone]])[0])
+    # The truth between its samples: a straight line, the hand's position at the
+    # estimate's time; on a truth sample, pose_errors against that sample.
+    t = rows["times_s"]
+    i = np.clip(np.searchsorted(run.truth_times_s, t, side="right") - 1, 0,
+                len(run.truth_times_s) - 2)
+    t0, t1 = run.truth_times_s[i], run.truth_times_s[i + 1]
+    w = ((t - t0) / (t1 - t0))[:, None]
+    between = (1 - w) * run.truth_X_CE[i, :3, 3] + w * run.truth_X_CE[i + 1, :3, 3]
+    np.testing.assert_allclose(rows["translation_mm"][alone], 1e3 * np.linalg.norm(
+        sampled.X_CE[k[alone], :3, 3] - between[alone], axis=1), rtol=1e-9, atol=1e-9)
+    on_grid = np.isclose(t, t0, rtol=0, atol=1e-12) & alone
+    assert on_grid.sum() > 0
+    np.testing.assert_allclose(rows["translation_mm"][on_grid], pose_errors(
+        sampled.X_CE[k[on_grid]], run.truth_X_CE[i[on_grid]])[0], rtol=1e-9)
     assert np.all(rows["times_s"] <= np.asarray(arrivals) + 1e-12)  # its latest reading
     text = image_health_csv_text("s", "none", 3, {"full_fusion": {"images": rows},
                                                   "encoders_only": {}})
