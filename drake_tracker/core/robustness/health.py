@@ -151,7 +151,8 @@ class HealthParams:
     #: hidden is not confirmed. Chosen on the quick suite's 130 recorded runs at tracker
     #: stream 0, checked on stream 100 (from 5 s, 13,130 samples each; every estimate
     #: unchanged): ``tracking`` within 10 mm on 98.2 % and 98.5 % of the samples that
-    #: say it, and none of those over 50 mm off says it; 0.9 of the unhidden pixels only
+    #: say it, and none of those over 50 mm off says it (at ea691c4: 99.6 % of the
+    #: images that say it, on both streams; docs/evaluation.md); 0.9 of the unhidden pixels only
     #: (the rule before) gave 87.9 % and 87.7 %, 3.7 % and 3.8 %. The price: 73-74 % of
     #: the samples within 10 mm say ``tracking`` against 85-87 %, most of the rest with
     #: part of the arm behind an occluder. Reported only: a controller that needs the
