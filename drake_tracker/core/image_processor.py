@@ -227,7 +227,7 @@ class ImageProcessor:
             rendered_enc = self.update.renderer.render(candidate[MEAN_A][None])[0]
             encoders = image_consistency(predicted.time_s, rendered_enc, observed,
                                          image.likelihood)
-            misplaced = is_misplaced(predicted, encoders, self.params.health)
+            misplaced = is_misplaced(predicted, encoders, self.params.health, health)
             reason = self.restart_reason(predicted, encoders, health)
             if reason:
                 log.warning("image %d at %.3f s: %s; the belief restarts from the encoders",
@@ -376,7 +376,7 @@ class ImageProcessor:
         if not self.consistent(estimate) and self.consistent(encoders) and (
                 agreeing_pixels(encoders) > agreeing_pixels(estimate)):
             return "it agrees with the encoders' arm and not with the estimate"
-        if is_misplaced(estimate, encoders, self.params.health) and restart_due(
+        if is_misplaced(estimate, encoders, self.params.health, health) and restart_due(
                 health, estimate.time_s, self.params.health):
             return (f"the estimate has put the arm out of view since "
                     f"{health.misplaced_since_s:.3f} s while the encoders put it in view")

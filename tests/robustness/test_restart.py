@@ -176,6 +176,28 @@ def test_an_estimate_that_renders_under_half_the_encoders_arm_is_misplaced():
                                                                False]
 
 
+def test_a_belief_never_confirmed_and_hidden_where_the_encoders_arm_shows_is_misplaced():
+    """A belief no image has confirmed since the start or a restart counts its unhidden
+    pixels: the start-up search put the arm behind the real one (560 pixels rendered, all
+    hidden). An arm once confirmed and then hidden is an occlusion, and keeps its rendered
+    count; an encoders' arm hidden as well says nothing."""
+    params = HealthParams()  # min_robot_pixels 30, misplaced_fraction 0.5
+    behind = ImageConsistency(0.0, 560, 0.0, 0.0, occluded=1.0)
+    encoders = ImageConsistency(0.0, 1046, 0.03, 0.42, occluded=0.53)  # 492 unhidden
+    assert is_misplaced(behind, encoders, params, health=TrackerHealth())
+    assert not is_misplaced(behind, encoders, params)  # no health: rendered pixels
+    confirmed = TrackerHealth(confirmed_s=0.5)  # once confirmed, hidden: an occlusion
+    assert not is_misplaced(behind, encoders, params, health=confirmed)
+    hidden_too = replace(encoders, occluded=0.98)  # 21 unhidden: both behind something
+    assert not is_misplaced(behind, hidden_too, params, health=TrackerHealth())
+    # Half of the encoders' rendered arm, unhidden, is enough; and an image that shows
+    # the belief's arm more than the encoders' keeps it.
+    half = replace(behind, robot_pixels=1046, occluded=0.5)
+    assert not is_misplaced(half, encoders, params, health=TrackerHealth())
+    shown = ImageConsistency(0.0, 560, 0.09, 0.0, occluded=0.9)  # 50 of 56 unhidden agree
+    assert not is_misplaced(shown, encoders, params, health=TrackerHealth())
+
+
 def test_an_image_confirms_one_arm_more_only_with_enough_agreeing_pixels():
     """``confirms_more``: at least ``min_robot_pixels`` agreeing pixels, and more than
     the other arm's; two arms the image shows nothing of (an estimate out of view, an
