@@ -143,7 +143,7 @@ class HealthParams:
     #: images each confirm (agree with, within 3σ of the pixel noise) at least this
     #: fraction of the robot pixels the estimate renders on valid image pixels
     #: (``confirms``); a pixel the image shows hidden confirms nothing, so an arm partly
-    #: hidden is ``uncertain``. At ea691c4, on the quick suite's 130 recorded runs, both
+    #: hidden is ``uncertain``. At 678a4b4, on the quick suite's 130 recorded runs, both
     #: tracker streams: ``tracking`` within 10 mm on 99.6 % of the images that say it,
     #: none of the images over 50 mm off saying it (docs/evaluation.md). Reported only:
     #: a controller that needs the arm (``servo``) stops at ``lost``, not ``uncertain``.
