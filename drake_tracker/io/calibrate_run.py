@@ -28,7 +28,11 @@ from drake_tracker.core.calibration.fold import (
     camera_only_joints,
     fit_cameras,
 )
-from drake_tracker.core.calibration.online import found_window, shows_the_arm
+from drake_tracker.core.calibration.online import (
+    found_window,
+    image_scorer,
+    shows_the_arm,
+)
 from drake_tracker.core.calibration.window_fit import WindowFit, WindowImage, WindowLayout
 from drake_tracker.core.robustness.health import HealthState
 from drake_tracker.core.sensors.depth_frames import in_metres
@@ -143,7 +147,7 @@ def calibrate_cameras(events: Iterable[Event], model: TrackerModel, cameras: dic
         for capture_s, depth in chosen:
             observation = update.prepare(depth)
             images.append(WindowImage(name, window.reading_at(capture_s - offset_s),
-                                      _scorer(update, observation)))
+                                      image_scorer(update, observation)))
     _, belief = tracker.buffer.present()
     _require_views(tracker, layout, images, belief_theta(model, layout, belief),
                    tracker.params.health.min_robot_pixels)
@@ -293,7 +297,3 @@ def _require_views(tracker, layout: WindowLayout, images: list[WindowImage],
             raise ValueError(f"camera '{camera}' sees at most {max(shown)} pixels of the arm "
                              f"in the window's images (fewer than {min_pixels}): choose a "
                              f"window in which every camera sees the arm")
-
-
-def _scorer(update, observation):
-    return lambda q: update.log_likelihood(q, observation)

@@ -200,7 +200,7 @@ class SelfCalibration:
             for k in picks.astype(int):
                 _, _, observation, reading = mine[k]
                 update = updates[name]
-                images.append(WindowImage(name, reading, _scorer(update, observation)))
+                images.append(WindowImage(name, reading, image_scorer(update, observation)))
                 readings.append(reading)
         started = time.perf_counter()
         offsets, fit = fit_cameras(model, params, images, prior, np.mean(readings, axis=0),
@@ -243,5 +243,7 @@ def robot_reading(prior: np.ndarray, update: CpfImageUpdate) -> np.ndarray:
     return prior[MEAN_A, robot] + prior[MEAN_B, robot]
 
 
-def _scorer(update: CpfImageUpdate, observation):
+def image_scorer(update: CpfImageUpdate, observation):
+    """``WindowImage``'s score: the log-likelihood of ``observation`` (prepared by
+    ``update``) at configurations q, by its camera's image update."""
     return lambda q: update.log_likelihood(q, observation)
