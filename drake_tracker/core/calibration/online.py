@@ -25,7 +25,7 @@ restart keeps them too.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -39,6 +39,7 @@ from drake_tracker.core.robustness.health import HealthState
 
 if TYPE_CHECKING:
     from drake_tracker.core.cpf.image_update import CpfImageUpdate
+    from drake_tracker.core.likelihood.pixel_model import PreparedObservation
     from drake_tracker.core.resolved_params import ResolvedParams
     from drake_tracker.core.robustness.health import TrackerHealth
     from drake_tracker.robot.model import TrackerModel
@@ -243,7 +244,8 @@ def robot_reading(prior: np.ndarray, update: CpfImageUpdate) -> np.ndarray:
     return prior[MEAN_A, robot] + prior[MEAN_B, robot]
 
 
-def image_scorer(update: CpfImageUpdate, observation):
+def image_scorer(update: CpfImageUpdate, observation: PreparedObservation
+                 ) -> Callable[[np.ndarray], np.ndarray]:
     """``WindowImage``'s score: the log-likelihood of ``observation`` (prepared by
     ``update``) at configurations q, by its camera's image update."""
     return lambda q: update.log_likelihood(q, observation)
