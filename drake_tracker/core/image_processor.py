@@ -34,6 +34,7 @@ from drake_tracker.core.likelihood.occlusion import (
     with_pixel_occlusion,
 )
 from drake_tracker.core.resolved_params import ResolvedParams
+from drake_tracker.core.robustness import least_restart as partial
 from drake_tracker.core.robustness.health import (
     Challenger,
     ImageConsistency,
@@ -50,6 +51,7 @@ from drake_tracker.core.robustness.health import (
 from drake_tracker.core.robustness.innovation import Innovation, image_innovation
 from drake_tracker.core.robustness.jump_visibility import jump_testable
 from drake_tracker.core.robustness.second_opinion import EncoderSearch
+from drake_tracker.core.robustness.skips import out_of_view_reason
 from drake_tracker.core.sensors.camera import CameraIntrinsics
 from drake_tracker.core.sensors.depth_frames import DepthFrame, image_time
 from drake_tracker.core.sensors.depth_units import check_depth_units
@@ -157,6 +159,12 @@ class ImageProcessor:
                 if name in params.camera_chain and i not in others}
             kept = np.array([i for i in range(len(joints.names)) if i not in own], np.int64)
             self.remount = replace(self.restart, untouched=kept)
+        #: The robot joints (base to tip) and camera offset joints a restart may keep.
+        touched = np.ones(len(joints.names), bool)
+        if self.restart.untouched is not None:
+            touched[self.restart.untouched] = False
+        self._restarted = (np.flatnonzero(touched & joints.robot & (start[VAR_B] > 0)),
+                           np.flatnonzero(touched & ~joints.robot))
         self.update = CpfImageUpdate(
             model, camera, list(params.blocks_for(camera_name)), im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
@@ -230,8 +238,19 @@ class ImageProcessor:
             misplaced = is_misplaced(predicted, encoders, self.params.health, health)
             reason = self.restart_reason(predicted, encoders, health)
             if reason:
-                log.warning("image %d at %.3f s: %s; the belief restarts from the encoders",
-                            frame.sequence, predicted.time_s, reason)
+                hp = self.params.health
+                restart, scores, depth = partial.least_restart(
+                    self.update, restart, partial.restart_family(restart, *self._restarted),
+                    prior, observation, hp.second_opinion_margin_nats_per_pixel,
+                    lambda depth: partial.fits(image_consistency(
+                        predicted.time_s, depth, observed, image.likelihood), encoders, hp))
+                log.warning("image %d at %.3f s: %s; the belief restarts from the encoders%s",
+                            frame.sequence, predicted.time_s, reason,
+                            partial.kept_note(restart, scores))
+                if restart.kept_joints is not None:  # a partial restart (least_restart)
+                    candidate, rendered_enc = restart.apply(prior), depth
+                    encoders = image_consistency(predicted.time_s, depth, observed,
+                                                 image.likelihood)
                 restarted, misplaced, acquired = True, False, False
                 prior, rendered, predicted = candidate, rendered_enc, encoders
             elif shows_no_arm(predicted, encoders, health, self.params.health):
@@ -246,7 +265,8 @@ class ImageProcessor:
             remounted = None if held else self.search.remounted(prior, observed, predicted)
             if remounted is None:
                 return ImageOutcome(None, None, predicted, challenger=health.challenger,
-                                    skip_reason=self._out_of_view_reason(predicted))
+                                    skip_reason=out_of_view_reason(
+                                        self.camera_name, predicted, self.params.health))
             log.warning("image %d at %.3f s (camera '%s'): the image hides the arm where the "
                         "estimate puts it, and shows it where the camera's nominal mount does;"
                         " the camera's pose restarts", frame.sequence, predicted.time_s,
@@ -331,29 +351,6 @@ class ImageProcessor:
             observation = held.pin(observation, prior)
         return ImageOutcome(observation, result, predicted, restarted, misplaced,
                             challenger=challenger, innovation=innovation)
-
-    def _out_of_view_reason(self, predicted: ImageConsistency) -> str:
-        """Why an image of one of several cameras that shows fewer than
-        ``health.min_robot_pixels`` of the arm unhidden where the estimate puts it is not
-        applied. Such an image only says where the arm is not, and the posterior is
-        pushed away from the view, onto the joints only this camera sees (its offsets, a
-        pan-tilt head): on in-out-in-2cam/none seed 0 the head camera's pose drifted 0.5
-        to 4.4 deg in 5 s with the hand out of its view (the hand in its frame 1 to 97
-        mm off). With one camera its restart and out-of-view logic use that information.
-
-        Nor one that shows more of the arm hidden than unhidden while another camera
-        tracks it. Measured on occlusion-lasting-2cam at its full 30 s: the head camera's
-        first images of the arm coming out from behind the plate (33-165 unhidden
-        pixels) pinned its pose 1.2 deg off; its later images then moved the arm 8-31
-        deg a joint, the post camera's moved it back, and the head camera ended 10-30
-        deg off (the hand 450-890 mm off in its frame; docs/evaluation.md)."""
-        if predicted.visible_robot_pixels >= self.params.health.min_robot_pixels:
-            return (f"camera '{self.camera_name}' sees {predicted.occluded:.0%} of the arm "
-                    f"hidden where the estimate puts it, while another camera tracks it: "
-                    f"the other cameras hold the arm")
-        return (f"camera '{self.camera_name}' sees {predicted.visible_robot_pixels:.0f} "
-                f"unhidden robot pixels where the estimate puts the arm (fewer than "
-                f"{self.params.health.min_robot_pixels}): the other cameras hold the arm")
 
     def restart_reason(self, estimate: ImageConsistency, encoders: ImageConsistency,
                        health: TrackerHealth) -> str:

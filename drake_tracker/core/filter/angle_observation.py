@@ -65,6 +65,10 @@ class Restart:
     #: Each joint's encoder variance σq² (n,) (None: exact readings, which leave a joint
     #: without bias no angle variance).
     reading_var: np.ndarray | None = None
+    #: Indices of joints that keep what is known, as ``keep_bias`` does for every joint
+    #: (their means kept, a bias step of ``bias_var``), while the others restart: the
+    #: joints an image does not contradict (``core/robustness/least_restart.py``).
+    kept_joints: np.ndarray | None = None
 
     def pinned(self, angle: np.ndarray | None) -> Restart:
         """This restart with ``pinned_angle`` = ``angle`` (None: none pinned)."""
@@ -72,21 +76,30 @@ class Restart:
 
     def kept(self) -> Restart:
         """This restart keeping the biases and the camera offset (``keep_bias``)."""
-        return replace(self, pinned_angle=None, keep_bias=True)
+        return replace(self, pinned_angle=None, keep_bias=True, kept_joints=None)
+
+    def keeping(self, joints: np.ndarray) -> Restart:
+        """This restart with ``joints`` (indices) keeping what is known (``kept_joints``)."""
+        joints = np.asarray(joints, np.int64)
+        return replace(self, kept_joints=joints if len(joints) else None)
 
     def apply(self, prior: np.ndarray) -> np.ndarray:
         """The restarted (5, n) belief: angle means ``a + b`` of ``prior`` (or the pinned
         angle), bias means 0 (or ``a + b`` minus the pinned angle), ``var_a = A``,
         ``cov_ab = -A``, ``var_b = A + σq²`` (see the class); with ``keep_bias``,
         ``prior`` with a bias step of variance ``bias_var``."""
-        if self.keep_bias:
+        if self.keep_bias or self.kept_joints is not None:
             kept = np.array(prior, float, copy=True)
             kept[VAR_A] += self.bias_var
             kept[VAR_B] += self.bias_var
             kept[COV_AB] -= self.bias_var
             if self.untouched is not None and len(self.untouched):
                 kept[:, self.untouched] = prior[:, self.untouched]
-            return kept
+            if self.keep_bias:
+                return kept
+            restarted = replace(self, kept_joints=None).apply(prior)
+            restarted[:, self.kept_joints] = kept[:, self.kept_joints]
+            return restarted
         restarted = np.zeros_like(prior)
         restarted[MEAN_A] = prior[MEAN_A] + prior[MEAN_B]
         if self.pinned_angle is not None:
