@@ -23,10 +23,10 @@ for a second instead of at once (arm++/constant seed 0, stream 100: median from 
 1.56 -> 2.25 mm). Only members whose rendered arm ``fits`` count: one that keeps the arm
 out of view would score 0 and beat every arm in view that the image does not fit.
 
-The family, over the m robot joints a restart touches (in the model's order, base to
+The family, over the k robot joints a restart touches (in the model's order, base to
 tip), each with the camera offset restarted or kept: every joint alone, every joint but
 one, every chain's prefix (base to a joint) and suffix (a joint to the tip): at most
-2 (4 m + 1) members, rendered in one batch.
+2 (4 k + 1) members, rendered in one batch.
 """
 
 from __future__ import annotations
