@@ -62,9 +62,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: A bias jump is looked for over at most this much time since the previous image (s).
-MAX_JUMP_WINDOW_S = 1.0
-
 
 def image_rng(seed: int, sequence: int, camera_index: int = 0) -> np.random.Generator:
     """The CPF's random stream for image ``sequence`` of the model's camera
@@ -177,12 +174,14 @@ class ImageProcessor:
 
     def jump_probability(self, elapsed_s: float) -> np.ndarray:
         """(n,) probability that each joint's bias jumped within ``elapsed_s`` (the time
-        since the previous applied image; at most ``MAX_JUMP_WINDOW_S``). Callers pass 0
+        since the previous applied image; at most ``health.max_unconfirmed_s``, the
+        longest a belief is held without an image confirming it, which replaces a
+        constant of its own, 1 s, with the same value). Callers pass 0
         until the tracker has acquired the arm (``TrackerHealth.acquired``): the start is
         the initial prior's job, and a jump-wide prior there let the first images swing a
         shoulder 35 deg to put the arm out of view (a robot rendered nowhere scores 0, a
         misaligned one less), measured on s-head-arm/constant, 0.7 m from then on."""
-        window = min(max(float(elapsed_s), 0.0), MAX_JUMP_WINDOW_S)
+        window = min(max(float(elapsed_s), 0.0), self.params.health.max_unconfirmed_s)
         return -np.expm1(-self._jump_rate * window)
 
     def observe(self, frame: DepthFrame, prior: np.ndarray, elapsed_s: float = np.inf,

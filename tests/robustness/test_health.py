@@ -245,3 +245,23 @@ def test_an_image_shows_no_arm_only_where_neither_arm_is_seen(acquired, estimate
     health = TrackerHealth(acquired=acquired)
     got = shows_no_arm(_seen(*estimate), _seen(*encoders), health, HealthParams())
     assert got is expected
+
+
+def test_a_bias_jump_is_looked_for_over_at_most_the_unconfirmed_time(apollo):
+    """The jump probability of an image is 1 - exp(-rate t), t the time since the
+    previous applied image, never longer than ``health.max_unconfirmed_s``: a belief
+    held longer unconfirmed is searched for again, without jumps."""
+    from drake_tracker.core.image_processor import ImageProcessor
+    from drake_tracker.core.sensors.camera import CameraIntrinsics
+    from drake_tracker.params.resolve import resolve_tracker_params
+
+    params = TrackerParams()
+    params.health.max_unconfirmed_s = 0.4
+    rate = params.kalman.robot_joints.bias_jump_rate_per_s
+    processor = ImageProcessor(apollo, CameraIntrinsics.from_fov(80, 60, np.radians(45.0)),
+                               resolve_tracker_params(params, apollo))
+    arm = apollo.joint_names.index("arm_joint_2")
+    for elapsed, window in ((0.1, 0.1), (0.3, 0.3), (0.4, 0.4), (2.0, 0.4), (np.inf, 0.4)):
+        assert processor.jump_probability(elapsed)[arm] == pytest.approx(
+            1.0 - np.exp(-rate * window), rel=1e-12)
+    assert processor.jump_probability(-1.0)[arm] == 0.0
