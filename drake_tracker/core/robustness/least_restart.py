@@ -16,12 +16,13 @@ scored by the image's log-likelihood ℓ at its mean, the one currency of the se
 m = ``health.second_opinion_margin_nats_per_pixel`` and N the image's valid pixels: it
 explains the image better than the full restart and than no arm at all (ℓ = 0: the
 likelihood scores only the pixels where a configuration puts the robot), each by the
-margin. Measured without the second term (the quick suite's 130 recorded runs, both
-tracker streams, 2026-11-30): a member kept a bias that an earlier search had put out of
-view, ℓ -1,686 against the full restart's -2,131, and the arm came back 85-131 mm off
-for a second instead of at once (arm++/constant seed 0, stream 100: median from 5 s
-1.56 -> 2.25 mm). Only members whose rendered arm ``fits`` count: one that keeps the arm
-out of view would score 0 and beat every arm in view that the image does not fit.
+margin. Measured without the 0 (but never for a belief no image had confirmed; the
+quick suite's 130 recorded runs, both tracker streams, 2026-11-30): a member kept a bias
+that an earlier search had put out of view, ℓ -1,686 against the full restart's -2,131,
+and the arm came back 85-131 mm off for a second instead of at once (arm++/constant
+seed 0, stream 100: median from 5 s 1.56 -> 2.25 mm). Only members whose rendered arm
+``fits`` count: one that keeps the arm out of view would score 0 and beat every arm in
+view that the image does not fit.
 
 The family, over the k robot joints a restart touches (in the model's order, base to
 tip), each with the camera offset restarted or kept: every joint alone, every joint but
