@@ -156,12 +156,6 @@ class ImageProcessor:
                 if name in params.camera_chain and i not in others}
             kept = np.array([i for i in range(len(joints.names)) if i not in own], np.int64)
             self.remount = replace(self.restart, untouched=kept)
-        #: The robot joints (base to tip) and camera offset joints a restart may keep.
-        touched = np.ones(len(joints.names), bool)
-        if self.restart.untouched is not None:
-            touched[self.restart.untouched] = False
-        self._restarted = (np.flatnonzero(touched & joints.robot & (start[VAR_B] > 0)),
-                           np.flatnonzero(touched & ~joints.robot))
         self.update = CpfImageUpdate(
             model, camera, list(params.blocks_for(camera_name)), im.num_particles,
             im.likelihood, im.image_width_px, im.max_kl, im.renderer, im.near_m, im.far_m,
@@ -169,6 +163,9 @@ class ImageProcessor:
             im.search_depth_widening_m)
         self.search = EncoderSearch(self.update, params, self._occlusion_aware,
                                     self.restart, self.remount)
+        #: The robot joints (base to tip) and camera offset joints a restart may keep.
+        self._restarted = (np.flatnonzero(self.search.stepped), np.flatnonzero(
+            ~joints.robot & self.restart.touched(len(joints.names))))
         #: Where :meth:`observe`'s time went (``bench/decision.py`` reads it).
         self.times = DecisionTimes()
 

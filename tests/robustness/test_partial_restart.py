@@ -46,7 +46,7 @@ def test_the_partial_restarts_are_each_set_of_a_chain_once():
     sets = restarted_sets(4)
     assert sets[0] == (0, 1, 2, 3) and len(set(sets)) == len(sets) and () not in sets
     expected = {(0,), (1,), (2,), (3,), (1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2),
-                (0, 1), (1, 2, 3), (2, 3), (0, 1, 2, 3)}
+                (0, 1), (2, 3), (0, 1, 2, 3)}
     assert set(sets) == expected
     restart = Restart(np.full(7, 1e-3), np.full(7, 1e-2))
     family = restart_family(restart, np.array([0, 1, 2, 3]), np.array([5, 6]))

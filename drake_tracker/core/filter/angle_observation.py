@@ -70,6 +70,14 @@ class Restart:
     #: joints an image does not contradict (``core/robustness/least_restart.py``).
     kept_joints: np.ndarray | None = None
 
+    def touched(self, count: int) -> np.ndarray:
+        """(count,) whether this restart changes each of ``count`` joints (those not
+        ``untouched``)."""
+        mask = np.ones(count, bool)
+        if self.untouched is not None:
+            mask[self.untouched] = False
+        return mask
+
     def pinned(self, angle: np.ndarray | None) -> Restart:
         """This restart with ``pinned_angle`` = ``angle`` (None: none pinned)."""
         return replace(self, pinned_angle=angle, keep_bias=False)

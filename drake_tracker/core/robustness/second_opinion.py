@@ -146,9 +146,8 @@ class EncoderSearch:
         self.remount = remount
         self._remount_blocks = []
         if remount is not None:
-            own = np.ones(len(params.joints.names), bool)
-            own[remount.untouched] = False
-            self._remount_blocks = self._blocks_holding(own)
+            self._remount_blocks = self._blocks_holding(
+                remount.touched(len(params.joints.names)))
         joints = params.joints
         self._virtual = ~joints.robot
         self._occlusion_aware = occlusion_aware
@@ -160,11 +159,12 @@ class EncoderSearch:
         self._growth = sigma_b ** 2  # the bias random walk's variance per second
         # The kept search's step: the robot joints with a bias that this camera's images
         # may move, and the CPF blocks that hold them.
-        stepped = joints.robot & (np.asarray(restart.bias_var) > 0)
-        if restart.untouched is not None:
-            stepped[restart.untouched] = False
-        self._drift_step = replace(restart.kept(), untouched=np.flatnonzero(~stepped))
-        self._drift_blocks = self._blocks_holding(stepped)
+        #: (n,) the robot joints with a bias that the restart touches: the kept
+        #: search's, and the ones a partial restart chooses among (``least_restart``).
+        self.stepped = joints.robot & (np.asarray(restart.bias_var) > 0) & restart.touched(
+            len(joints.names))
+        self._drift_step = replace(restart.kept(), untouched=np.flatnonzero(~self.stepped))
+        self._drift_blocks = self._blocks_holding(self.stepped)
         #: The blocks a search covers when none are given (None: every block).
         self._blocks: list[np.ndarray] | None = None
 
