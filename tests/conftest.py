@@ -19,3 +19,13 @@ def no_challenger(monkeypatch):
     from drake_tracker.core.robustness.second_opinion import EncoderSearch
 
     monkeypatch.setattr(EncoderSearch, "challenge", lambda self, *args: (None, None))
+
+
+
+@pytest.fixture
+def no_second_opinion():
+    """The second opinion switched off for one test (``switches.second_opinion_off``)."""
+    from switches import second_opinion_off
+
+    with second_opinion_off():
+        yield

@@ -34,6 +34,12 @@ RETIRED_FIELDS = {
                                      "spread)",
     "health.challenger_images": "removed: a challenger searches for "
                                 "health.max_unconfirmed_s, then rests as long",
+    "health.second_opinion_agreement": "removed: an image is surprising when more of "
+                                       "the estimate's unhidden arm disagrees with it "
+                                       "than agrees (the same rule as 0.5)",
+    "health.misplaced_fraction": "removed: an estimate is misplaced when it renders "
+                                 "fewer robot pixels than half the encoders' arm (the "
+                                 "same rule as 0.5)",
     "health.no_arm_see_through": "removed: an image shows no arm when it sees behind "
                                  "all but fewer than health.min_robot_pixels of both the "
                                  "estimate's and the encoders' rendered arm",

@@ -100,7 +100,7 @@ def run_images(processor, frame, prior, count, elapsed_s=0.1, period_s=0.0):
 
 
 def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(
-        scene, caplog, request):  # noqa: F811
+        scene, caplog, request, no_second_opinion):  # noqa: F811
     """A confident belief (0.05 deg) with the elbow bent 40 deg, and no bias jump admitted
     (images 0 s apart): the update cannot leave it, as the protocol's fold could not. The
     one-image second opinion is off; the challenger, started because the elbow's bias
@@ -112,7 +112,6 @@ def test_a_challenger_replaces_an_implausible_belief_the_update_cannot_leave(
     prior = prior_at(model, reading, q)
     prior[VAR_A] = np.radians(0.05) ** 2
     params = TrackerParams()
-    params.health.second_opinion_agreement = 0.0
     processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     assert implausible_biases(prior, processor.search.plausible_std,
                               IMPLAUSIBLE_BIAS_SIGMAS).any()
@@ -143,7 +142,7 @@ def test_a_plausible_estimate_starts_no_challenger(scene):  # noqa: F811
     assert outcome.challenger is None and not outcome.restarted
 
 
-def test_a_challenger_rests_as_long_as_it_searched(scene):  # noqa: F811
+def test_a_challenger_rests_as_long_as_it_searched(scene, no_second_opinion):  # noqa: F811
     """A robot whose bias really is that large: the challenger never wins (margin out of
     reach), searches for ``max_unconfirmed_s`` (two images 0.1 s apart), rests as long,
     then starts afresh."""
@@ -151,7 +150,6 @@ def test_a_challenger_rests_as_long_as_it_searched(scene):  # noqa: F811
     prior = prior_at(model, reading, truth)
     prior[MEAN_B][model.joint_names.index("arm_joint_3")] = np.radians(40.0)
     params = TrackerParams()
-    params.health.second_opinion_agreement = 0.0
     params.health.second_opinion_margin_nats_per_pixel = 1e2
     params.health.max_unconfirmed_s = 0.2
     params.image.acquisition_num_particles = 10
@@ -194,7 +192,8 @@ def apollo_out_of_view():
     return model, truth, frame, out_of_view_prior(model, truth, bias)
 
 
-def test_the_decision_times_hold_the_searches_beside_the_update(scene):  # noqa: F811
+def test_the_decision_times_hold_the_searches_beside_the_update(
+        scene, no_second_opinion):  # noqa: F811
     """``ImageProcessor.times`` splits each image's time: the tracked belief's update
     (the CPF's own clock, ``StageTimes.per_update``, holds its first call of the image)
     counts as the update, the challenger's search (the image's other CPF calls) as the
@@ -203,7 +202,6 @@ def test_the_decision_times_hold_the_searches_beside_the_update(scene):  # noqa:
     prior = prior_at(model, reading, truth)
     prior[MEAN_B][model.joint_names.index("arm_joint_3")] = np.radians(40.0)
     params = TrackerParams()
-    params.health.second_opinion_agreement = 0.0
     params.health.second_opinion_margin_nats_per_pixel = 1e2  # it never wins
     processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     times, challenger = processor.times, None

@@ -16,6 +16,7 @@ opinion, the challenger) run from both cameras.
 
 import numpy as np
 import pytest
+from switches import second_opinion_off
 from test_restart import CAMERA, hand_error_mm
 from test_second_opinion import ENCODER_BIAS_DEG
 
@@ -100,17 +101,17 @@ def challenge(model, prior, frame, images: int, keep_camera: bool):
     and the last outcome. ``keep_camera`` False: searches from the nominal camera only
     (the code before)."""
     params = TrackerParams()
-    params.health.second_opinion_agreement = 0.0
     processor = ImageProcessor(model, CAMERA, resolve_tracker_params(params, model))
     if not keep_camera:
         processor.search.restarts = lambda prior: [processor.restart]
     health = TrackerHealth(acquired=True)
-    for k in range(1, images + 1):
-        outcome = processor.observe(frame, prior, 0.0, health)
-        if outcome.restarted:
-            return k, outcome
-        health = next_health(health, outcome.consistency, params.health, False, False,
-                             outcome.challenger)
+    with second_opinion_off():
+        for k in range(1, images + 1):
+            outcome = processor.observe(frame, prior, 0.0, health)
+            if outcome.restarted:
+                return k, outcome
+            health = next_health(health, outcome.consistency, params.health, False, False,
+                                 outcome.challenger)
     return 0, outcome
 
 

@@ -186,15 +186,14 @@ def test_a_bias_step_is_reacquired_within_two_seconds(apollo, step_run):
     assert e[t >= 3.5].max() < 10.0
 
 
-def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(apollo, step_run,
-                                                                         no_challenger):
+def test_without_recovery_a_bias_step_is_reported_lost_within_one_second(
+        apollo, step_run, no_challenger, no_second_opinion):
     """No bias jump and no search from the encoders' arm (the second opinion, the
     challenger): the filter follows the 10 deg step at the pace of its random walk, and
     the images that see through the arm say so. (With only the jumps off, the second
     opinion restarted at the step, and here the state did not go lost.)"""
     params = TrackerParams()
     params.kalman.robot_joints.bias_jump_rate_per_s = 0.0
-    params.health.second_opinion_agreement = 0.0
     errors, lost_at = _track_step(apollo, step_run, params, step_s=1.5)
     assert lost_at is not None and lost_at <= 2.5, lost_at
 

@@ -162,5 +162,3 @@ def test_the_kept_search_is_asked_after_an_inconsistent_image(last, agreement, v
     assert image.visible_robot_pixels == pytest.approx(visible)
     assert drifts(image, health, params) is expected
     assert not drifts(image, TrackerHealth(acquired=True), params)  # nothing applied yet
-    off = HealthParams(second_opinion_agreement=0.0)  # the second opinion switched off
-    assert not drifts(image, health, off)

@@ -11,6 +11,7 @@ import logging
 
 import numpy as np
 import pytest
+from switches import second_opinion_off
 from test_restart import (
     CAMERA,
     apollo_in_view,
@@ -35,7 +36,7 @@ ENCODER_BIAS_DEG = {"arm_joint_1": 3.0, "arm_joint_2": -3.0, "arm_joint_3": 3.0}
 
 
 def test_an_image_is_surprising_when_its_unhidden_arm_mostly_disagrees():
-    params = HealthParams()  # min_robot_pixels 30, second_opinion_agreement 0.5
+    params = HealthParams()  # min_robot_pixels 30
     assert is_surprising(ImageConsistency(0.0, 900, 0.40, 0.1), params)
     assert not is_surprising(ImageConsistency(0.0, 900, 0.60, 0.1), params)
     # Hidden pixels neither agree nor count: 100 of 1000 unhidden, 40 agree.
@@ -63,8 +64,9 @@ def test_an_image_is_surprising_when_its_unhidden_arm_mostly_disagrees():
     assert is_surprising(surprising, three, after(agreeing, surprising, surprising, p=three))
     one = HealthParams(images_in_a_row=1)
     assert is_surprising(surprising, one, after(agreeing, p=one))
-    never = HealthParams(second_opinion_agreement=0.0)
-    assert not is_surprising(ImageConsistency(0.0, 900, 0.0, 0.9), never)
+    # A vote: half the unhidden arm agreeing is a tie, not a surprise.
+    assert not is_surprising(ImageConsistency(0.0, 900, 0.5, 0.1), params)
+    assert is_surprising(ImageConsistency(0.0, 900, 0.4989, 0.1), params)
 
 
 @pytest.fixture(scope="module")
@@ -101,10 +103,9 @@ def test_a_wrong_fold_is_replaced_by_the_search_from_the_encoders(scene, caplog)
     encoders = hand_error_mm(model, truth, full_reading(model, reading))
     assert start > 100.0 and 10.0 < encoders < start
     acquired = TrackerHealth(acquired=True)
-    off = TrackerParams()
-    off.health.second_opinion_agreement = 0.0
-    alone = ImageProcessor(model, CAMERA, resolve_tracker_params(off, model)).observe(frame, prior,
-    0.1, acquired)
+    with second_opinion_off():
+        alone = ImageProcessor(model, CAMERA, resolve_tracker_params(
+            TrackerParams(), model)).observe(frame, prior, 0.1, acquired)
     assert is_surprising(alone.consistency, TrackerParams().health)
     assert not alone.restarted
     stuck = hand_error_mm(model, truth, alone.observation.apply(prior)[MEAN_A])
@@ -129,10 +130,9 @@ def test_an_unsurprising_image_gets_no_second_opinion(scene):
     outcome = ImageProcessor(model, CAMERA, resolve_tracker_params(TrackerParams(),
     model)).observe(frame, prior, 0.1,
                                                                      acquired)
-    off = TrackerParams()
-    off.health.second_opinion_agreement = 0.0
-    alone = ImageProcessor(model, CAMERA, resolve_tracker_params(off, model)).observe(frame, prior,
-    0.1, acquired)
+    with second_opinion_off():
+        alone = ImageProcessor(model, CAMERA, resolve_tracker_params(
+            TrackerParams(), model)).observe(frame, prior, 0.1, acquired)
     assert not outcome.restarted and not is_surprising(outcome.consistency,
                                                        TrackerParams().health)
     np.testing.assert_array_equal(outcome.result.mean, alone.result.mean)
@@ -165,11 +165,8 @@ def test_after_an_inconsistent_innovation_the_kept_search_catches_a_drift(scene,
     alone = ImageProcessor(model, CAMERA, params).observe(frame, prior, 0.1, steady)
     assert not alone.restarted and not is_surprising(alone.consistency,
                                                      TrackerParams().health, steady)
-    switched_off = TrackerParams()
-    switched_off.kalman.robot_joints.bias_jump_rate_per_s = 0.0
-    switched_off.health.second_opinion_agreement = 0.0
-    off = ImageProcessor(model, CAMERA, resolve_tracker_params(switched_off, model)).observe(
-        frame, prior, 0.1, drifting)
+    with second_opinion_off():
+        off = ImageProcessor(model, CAMERA, params).observe(frame, prior, 0.1, drifting)
     np.testing.assert_array_equal(off.observation.information, alone.observation.information)
     np.testing.assert_array_equal(off.observation.precision, alone.observation.precision)
     with caplog.at_level(logging.WARNING):

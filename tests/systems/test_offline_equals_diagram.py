@@ -16,8 +16,10 @@ import pytest
 from fast_params import small_params
 from offline_vs_diagram import H, assert_same_when_settled, feed, simulate
 
+from drake_tracker.core import image_processor
 from drake_tracker.core.calibration.calibration_params import SelfCalibrationParams
-from drake_tracker.core.robustness import second_opinion
+from drake_tracker.core.robustness import health, second_opinion
+from drake_tracker.core.robustness.health import agreeing_pixels, confirms_more
 from drake_tracker.io.synthetic import synthetic_run
 from drake_tracker.robot.model import build_tracker_model, robot_preset
 from drake_tracker.tracker import Tracker
@@ -34,6 +36,8 @@ class Case:
     #: (run, params) -> (run, stamps, sequences) with the faults applied.
     faults: object = None
     tune: object = None
+    #: (monkeypatch) -> None: a rule of the decision changed for the case.
+    patch: object = None
     latency_s: float = 0.0
     #: Compare from this reading on (before it the estimates differ by design).
     first: int = 0
@@ -103,7 +107,17 @@ def _no_arm(run):
 
 
 def _restart(p):
-    p.health.misplaced_fraction, p.health.max_unconfirmed_s = 0.99, 1e-6
+    p.health.max_unconfirmed_s = 1e-6
+
+
+def _misplaced_at_99_percent(monkeypatch):
+    """An estimate that renders fewer pixels than 99 % of the encoders' arm counts as
+    misplaced (not half), so that a 4 deg bias restarts."""
+    def misplaced(estimate, encoders, params, health=None):
+        return (encoders.robot_pixels >= params.min_robot_pixels
+                and estimate.robot_pixels < 0.99 * encoders.robot_pixels
+                and not confirms_more(estimate, encoders, params))
+    monkeypatch.setattr(image_processor, "is_misplaced", misplaced)
 
 
 def _nearer(run):
@@ -113,12 +127,20 @@ def _nearer(run):
 
 
 def _second_opinion(p):
-    p.health.second_opinion_agreement, p.health.second_opinion_margin_nats_per_pixel = 1.0, 0.0
+    p.health.second_opinion_margin_nats_per_pixel = 0.0
     p.image.num_particles = 5
 
 
+def _any_disagreement_surprises(monkeypatch):
+    """An image whose unhidden arm disagrees anywhere contradicts the estimate (not
+    where most of it disagrees), so that a 0.5 deg bias asks a second opinion."""
+    def contradicts(image, params):
+        visible = image.visible_robot_pixels
+        return visible >= params.min_robot_pixels and agreeing_pixels(image) < visible
+    monkeypatch.setattr(health, "contradicts", contradicts)
+
+
 def _challenger(p):
-    p.health.second_opinion_agreement = 0.0
     p.health.second_opinion_margin_nats_per_pixel = 0.0
     p.image.num_particles = 5
 
@@ -142,9 +164,11 @@ CASES = {
     "an encoder clock step forward": Case(faults=_encoder_step_forward, some_skipped=True,
                                           offline_log=("in a gap of the readings at the "
                                                        "same lag",)),
-    "restart": Case(bias_deg=4.0, tune=_restart, faults=_nearer, min_restarts=1,
+    "restart": Case(bias_deg=4.0, tune=_restart, patch=_misplaced_at_99_percent,
+                    faults=_nearer, min_restarts=1,
                     offline_log=("while the encoders put it in view",)),
-    "second opinion": Case(bias_deg=0.5, tune=_second_opinion, min_restarts=1,
+    "second opinion": Case(bias_deg=0.5, tune=_second_opinion,
+                           patch=_any_disagreement_surprises, min_restarts=1,
                            offline_log=("search from the encoders' arm explains it better",)),
     "challenger": Case(bias_deg=0.5, tune=_challenger, min_restarts=1,
                        offline_log=("a challenger searched from the encoders' arm",)),
@@ -162,8 +186,12 @@ def arm6():
 def test_offline_tracker_and_diagram_give_the_same_estimates(name, request, caplog,
                                                             monkeypatch):
     case = CASES[name]
-    if name == "challenger":  # a challenger at a 0.5 deg bias: the threshold made tiny
+    if name == "challenger":  # a challenger at a 0.5 deg bias: the threshold made tiny,
+        # the second opinion off
         monkeypatch.setattr(second_opinion, "IMPLAUSIBLE_BIAS_SIGMAS", 0.01)
+        request.getfixturevalue("no_second_opinion")
+    if case.patch is not None:
+        case.patch(monkeypatch)
     model = request.getfixturevalue(case.robot)
     run = synthetic_run(model, duration_s=case.duration_s, encoder_rate_hz=1.0 / H,
                         seed=case.seed, bias_rad=np.radians(case.bias_deg))
