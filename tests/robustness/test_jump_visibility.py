@@ -106,3 +106,32 @@ def test_a_joint_whose_move_is_hidden_cannot_test_a_jump(apollo_view):
     # Nothing to see at all: no joint can be tested.
     wall = np.full_like(clear, 0.3)
     assert not jump_testable(renderer, mean, joints, step, base, wall, PARAMS, 30).any()
+
+
+def test_the_gate_equals_rendering_both_moves_of_every_joint(apollo_view):
+    """``jump_testable`` renders -step only for the joints +step did not show: the same
+    answer as the plain form, both moves of every joint rendered and the larger count
+    taken, on images that hide the arm in part at random and at several thresholds."""
+    model, renderer, mean, base = apollo_view
+    joints = np.array(model.robot_joint_indices)
+    step = np.full(len(mean), np.radians(8.6))
+    rng = np.random.default_rng(3)
+    q = np.repeat(mean[None], 2 * joints.size, axis=0)
+    rows = np.arange(joints.size)
+    q[rows, joints] += step[joints]
+    q[joints.size + rows, joints] -= step[joints]
+    moved = renderer.render(q)
+    answers, by_minus_only = set(), 0
+    for trial in range(6):
+        observed = np.where(np.isfinite(base), base, 2.5)
+        observed[rng.random(base.shape) < 0.2 * trial] = 0.3  # hidden by something near
+        counts = changed_visible_pixels(base, moved, observed, PARAMS)
+        for min_pixels in (1, 5, 30, 300):
+            plain = np.maximum(counts[: joints.size], counts[joints.size:]) >= min_pixels
+            by_minus_only += int(np.sum((counts[: joints.size] < min_pixels) & plain))
+            gate = jump_testable(renderer, mean, joints, step, base, observed, PARAMS,
+                                 min_pixels)
+            np.testing.assert_array_equal(gate, plain)
+            answers.add(tuple(gate))
+    assert len(answers) > 3  # the cases differ: all, some and none of the joints
+    assert by_minus_only > 0  # and some joints show only their -step move
