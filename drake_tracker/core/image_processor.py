@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_tracker.core.calibration.online import MAX_HIDDEN_FRACTION
 from drake_tracker.core.cpf.image_update import CpfImageUpdate
 from drake_tracker.core.cpf.particle_filter import CPFResult
 from drake_tracker.core.filter.angle_observation import AngleObservation, Restart
@@ -257,7 +256,7 @@ class ImageProcessor:
                     f"no arm where one must be (a moved camera, or a stale or foreign frame)"))
         if self.several_cameras and not restarted and (
                 predicted.visible_robot_pixels < self.params.health.min_robot_pixels
-                or (others_track and predicted.occluded > MAX_HIDDEN_FRACTION)):
+                or (others_track and predicted.mostly_hidden)):
             remounted = None if held else self.search.remounted(prior, observed, predicted)
             if remounted is None:
                 return ImageOutcome(None, None, predicted, challenger=health.challenger,

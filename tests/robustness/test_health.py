@@ -264,3 +264,17 @@ def test_a_bias_jump_is_looked_for_over_at_most_the_unconfirmed_time(apollo):
         assert processor.jump_probability(elapsed)[arm] == pytest.approx(
             1.0 - np.exp(-rate * window), rel=1e-12)
     assert processor.jump_probability(-1.0)[arm] == 0.0
+
+
+def test_an_image_shows_the_arm_unless_more_of_it_is_hidden_than_not():
+    """``mostly_hidden`` is a vote, a tie is not (it replaces ``MAX_HIDDEN_FRACTION``, 0.5);
+    ``shows_the_arm`` (the calibration window's rule) also needs ``min_pixels`` unhidden."""
+    from drake_tracker.core.calibration.online import shows_the_arm
+
+    tie = ImageConsistency(0.0, 100, 0.5, 0.0, occluded=0.5)
+    more = ImageConsistency(0.0, 100, 0.49, 0.0, occluded=0.51)
+    assert not tie.mostly_hidden and more.mostly_hidden
+    assert shows_the_arm(TrackerHealth(latest=tie), 30)
+    assert not shows_the_arm(TrackerHealth(latest=more), 30)
+    assert not shows_the_arm(TrackerHealth(latest=tie), 51)  # 50 unhidden
+    assert not shows_the_arm(TrackerHealth(), 30)  # no image yet

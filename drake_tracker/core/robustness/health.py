@@ -73,6 +73,11 @@ class ImageConsistency:
         """Robot pixels that the image does not show hidden behind something."""
         return self.robot_pixels * (1.0 - self.occluded)
 
+    @property
+    def mostly_hidden(self) -> bool:
+        """More of the rendered arm hidden than unhidden (a vote; ``occluded > 0.5``)."""
+        return 2.0 * self.occluded > 1.0
+
 
 def image_consistency(time_s: float, rendered_m: np.ndarray, observed_m: np.ndarray,
                       params: LikelihoodParams) -> ImageConsistency:
@@ -264,10 +269,8 @@ def contradicts(image: ImageConsistency, params: HealthParams) -> bool:
     robot pixels it does not show hidden (at least ``min_robot_pixels``), more disagree
     with the estimate's depth than agree (a vote: no fraction to tune).
 
-    It replaces ``second_opinion_agreement`` (0.5, the same rule as a number): at 0.35
-    three cells of the quick suite were worse (s-full-arm/time-varying 4.7 -> 6.3 mm,
-    occlusion/time-varying 10.5 -> 15.6); at 0.65 none was, one better, but the
-    decision cost 11.5 % of the update against 8.7 % (``docs/method.md`` §7)."""
+    It replaces ``second_opinion_agreement`` (0.5, the same rule as a number), whose
+    other values were worse (``docs/method.md`` §7, the retired table)."""
     visible = image.visible_robot_pixels
     # agreeing < visible - agreeing, written so that it is exact in floating point
     return visible >= params.min_robot_pixels and 2 * agreeing_pixels(image) < visible
@@ -324,12 +327,11 @@ def is_misplaced(estimate: ImageConsistency, encoders: ImageConsistency,
     8.5 s, 400 mm off (quick suite, in-out-in/constant seed 0, tracker stream 100). Once
     confirmed, a hidden arm is an occlusion, and its belief is kept.
 
-    The half replaces ``misplaced_fraction`` (0.5, the same rule as a number): at 0.3
-    in-out-in/constant's worst seed went 44.8 -> 446 mm. Measured on s-head-arm/
-    time-varying seed 0 (the occlusion-hold bias setting): after a bias step the
-    estimate turned the head away from the arm over 5 s, each image agreeing with what
-    it still rendered (97 %), 789 -> 343 robot pixels against the encoders' 782, 770 mm
-    off."""
+    The half replaces ``misplaced_fraction`` (0.5, the same rule as a number; at 0.3
+    in-out-in/constant's worst seed went 44.8 -> 446 mm). Measured on s-head-arm/
+    time-varying seed 0: after a bias step the estimate turned the head away from the
+    arm over 5 s, each image agreeing with what it still rendered (97 %), 789 -> 343
+    robot pixels against the encoders' 782, 770 mm off."""
     shown = estimate.robot_pixels
     if health is not None and not np.isfinite(health.confirmed_s) and (
             encoders.visible_robot_pixels >= params.min_robot_pixels):
