@@ -272,7 +272,8 @@ class EncoderSearch:
         (``health.drifts``): the robot joints with a bias take the kept restart's step
         (``Restart.kept``: every mean kept, the bias variance of the start added, the
         reading held), every other joint (the camera offsets) stays, and the image
-        update searches those joints' blocks with its own particles and coarse sweeps.
+        update searches those joints' blocks with its own particles and sweeps (coarse
+        where ``image.sweep_image_widths_px`` makes them so; not at the defaults).
         Its answer replaces the update's if it explains the image better by the margin,
         as the second opinion's does. The CPF moves a joint by about two prior standard
         deviations per image, so a bias that walks or ramps faster than its model is
