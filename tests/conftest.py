@@ -21,7 +21,6 @@ def no_challenger(monkeypatch):
     monkeypatch.setattr(EncoderSearch, "challenge", lambda self, *args: (None, None))
 
 
-
 @pytest.fixture
 def no_second_opinion():
     """The second opinion switched off for one test (``switches.second_opinion_off``)."""

@@ -375,4 +375,3 @@ def test_a_restart_keeps_the_joints_it_leaves_untouched():
         plain = Restart(restart.angle_var, restart.bias_var, restart.pinned_angle,
                         restart.keep_bias).apply(prior)
         np.testing.assert_array_equal(after[:, :4], plain[:, :4])
-

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from fast_params import small_params
 from offline_vs_diagram import H, assert_same_when_settled, feed, simulate
+from switches import switch_second_opinion_off
 
 from drake_tracker.core import image_processor
 from drake_tracker.core.calibration.calibration_params import SelfCalibrationParams
@@ -145,6 +146,12 @@ def _challenger(p):
     p.image.num_particles = 5
 
 
+def _challenger_alone(monkeypatch):
+    """A challenger at a 0.5 deg bias: its threshold made tiny, the second opinion off."""
+    monkeypatch.setattr(second_opinion, "IMPLAUSIBLE_BIAS_SIGMAS", 0.01)
+    switch_second_opinion_off(monkeypatch)
+
+
 CASES = {
     "plain": Case(duration_s=0.6, seed=4, tune=_plain),
     "another robot": Case(robot="arm6", duration_s=0.6, seed=4, tune=_plain),
@@ -170,7 +177,8 @@ CASES = {
     "second opinion": Case(bias_deg=0.5, tune=_second_opinion,
                            patch=_any_disagreement_surprises, min_restarts=1,
                            offline_log=("search from the encoders' arm explains it better",)),
-    "challenger": Case(bias_deg=0.5, tune=_challenger, min_restarts=1,
+    "challenger": Case(bias_deg=0.5, tune=_challenger, patch=_challenger_alone,
+                       min_restarts=1,
                        offline_log=("a challenger searched from the encoders' arm",)),
     "images without the arm": Case(duration_s=1.6, seed=3, bias_deg=2.0, faults=_no_arm,
                                    some_skipped=True, offline_log=("no arm where one must be",)),
@@ -186,10 +194,6 @@ def arm6():
 def test_offline_tracker_and_diagram_give_the_same_estimates(name, request, caplog,
                                                             monkeypatch):
     case = CASES[name]
-    if name == "challenger":  # a challenger at a 0.5 deg bias: the threshold made tiny,
-        # the second opinion off
-        monkeypatch.setattr(second_opinion, "IMPLAUSIBLE_BIAS_SIGMAS", 0.01)
-        request.getfixturevalue("no_second_opinion")
     if case.patch is not None:
         case.patch(monkeypatch)
     model = request.getfixturevalue(case.robot)
